@@ -32,9 +32,10 @@ MPC step against re-solving the same horizon problem with IPOPT.
    the C driver's ``CLOCK_PROCESS_CPUTIME_ID``).  ``--export``: the same closed loop in the
    exported C package (``nc.export_mpc``, built by its Makefile at its default flags), each
    ``cartpole_mpc_step`` call timed in a C driver of its own, and its
-   inputs compared with the Python loop's.
+   inputs compared with the Python loop's; ``--peer ROOT``: also the package exported by the
+   ncgen tree ROOT (a child process), the two packages' runs alternating, their ratio.
 
-    python benchmarks/control.py [--calls 200] [--repeat 7] [--smoke] [--mpc-only] [--export]
+    python benchmarks/control.py [--calls 200] [--repeat 7] [--smoke] [--mpc-only] [--export] [--peer ROOT]
 """
 from __future__ import annotations
 
@@ -151,26 +152,59 @@ int main(int argc, char** argv) {
 """
 
 
-def exported_loop(ocp, x0, steps: int, repeat: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(U, T)``: the exported package's closed loop (:data:`C_DRIVER`): its inputs and each
-    step's time, the minimum over ``repeat`` runs."""
+#: Exports the cart-pole MPC package as :func:`cartpole_mpc` does, in a child process on another
+#: ncgen tree (``--peer``): argv = output directory, then x0.
+PEER_EXPORT = """
+import sys
+from pathlib import Path
+import numpy as np
+import ncgen as nc
+from ncgen.control.export import export_mpc
+from ncgen.optim.problem_file import load_problem
+examples = Path(nc.__file__).resolve().parents[1] / "examples"
+ocp = load_problem(examples / "cartpole_mpc.toml", nc.System.from_toml(examples / "cartpole.toml").build())[0]
+export_mpc(ocp, sys.argv[1], name="cartpole", terminal_weight=100.0, x0=np.array([float(v) for v in sys.argv[2:]]),
+           disturbance=[(1.0, 1.1, [8.0])])
+"""
+
+
+def build_exported(out: Path, ocp, x0, peer: str | None = None) -> Path:
+    """The exported package in ``out`` (by this tree, or by the ncgen tree ``peer`` in a child
+    process), built by its Makefile at its default flags, with :data:`C_DRIVER` as ``timing``."""
+    import subprocess
+    from ncgen.control.export import export_mpc
+    if peer is None:
+        export_mpc(ocp, out, name="cartpole", terminal_weight=100.0, x0=x0, disturbance=[(1.0, 1.1, [8.0])])
+    else:
+        subprocess.run([sys.executable, "-c", PEER_EXPORT, str(out), *(repr(float(v)) for v in x0)], check=True,
+                       env={**os.environ, "PYTHONPATH": peer}, cwd=peer, capture_output=True)   # cwd: `-c` imports from it
+    subprocess.run(["make", "demo"], cwd=out, check=True, capture_output=True)
+    (out / "timing.c").write_text(C_DRIVER)
+    objects = [f.name for f in sorted(out.glob("*.o")) if f.name not in ("demo.o", "main.o")]
+    subprocess.run(["cc", "-O2", "-o", "timing", "timing.c", *objects, "-lm"], cwd=out, check=True)
+    return out
+
+
+def exported_loop(ocp, x0, steps: int, repeat: int, peer: str | None = None) -> dict:
+    """``{tree: (U, T)}``: the exported package's closed loop (:data:`C_DRIVER`): its inputs and
+    each step's time, the minimum over ``repeat`` runs; with ``peer``, also the package exported
+    by that ncgen tree, the two packages' runs alternating."""
     import subprocess
     import tempfile
-    from ncgen.control.export import export_mpc
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "cartpole_mpc"
-        export_mpc(ocp, out, name="cartpole", terminal_weight=100.0, x0=x0, disturbance=[(1.0, 1.1, [8.0])])
-        subprocess.run(["make", "demo"], cwd=out, check=True, capture_output=True)
-        (out / "timing.c").write_text(C_DRIVER)
-        objects = [f.name for f in sorted(out.glob("*.o")) if f.name not in ("demo.o", "main.o")]
-        subprocess.run(["cc", "-O2", "-o", "timing", "timing.c", *objects, "-lm"], cwd=out, check=True)
-        run = subprocess.run(["./timing", str(steps), str(repeat), *(repr(float(v)) for v in x0)], cwd=out,
-                             check=True, capture_output=True, text=True)
-    rows = np.array([[float(v) for v in line.split()] for line in run.stdout.splitlines()])
-    return rows[:steps, 1], rows[:, 2].reshape(repeat, steps).min(axis=0)
+        trees = {"this tree": build_exported(Path(tmp) / "this", ocp, x0)}
+        if peer:
+            trees[f"peer {peer}"] = build_exported(Path(tmp) / "peer", ocp, x0, peer)
+        rows = {tree: [] for tree in trees}
+        for r in range(repeat):
+            for tree in (list(trees) if r % 2 == 0 else list(trees)[::-1]):
+                run = subprocess.run(["./timing", str(steps), "1", *(repr(float(v)) for v in x0)], cwd=trees[tree],
+                                     check=True, capture_output=True, text=True)
+                rows[tree].append([[float(v) for v in line.split()] for line in run.stdout.splitlines()])
+    return {tree: (np.array(r)[0, :, 1], np.array(r)[:, :, 2].min(axis=0)) for tree, r in rows.items()}
 
 
-def cartpole_mpc(steps: int, repeat: int, export: bool = False) -> None:
+def cartpole_mpc(steps: int, repeat: int, export: bool = False, peer: str | None = None) -> None:
     from ncgen.control.export import closed_loop
     from ncgen.control.reference import DiscreteOCP
     from ncgen.optim.problem_file import load_problem
@@ -266,9 +300,15 @@ def cartpole_mpc(steps: int, repeat: int, export: bool = False) -> None:
           f"max |ΔU| {np.max(np.abs(conv[20][1] - conv[10][1])):.1e} N); RTI inputs vs converged: max |ΔU| "
           f"{np.max(np.abs(U_py - conv[10][1])):.2e} N")
     if export:
-        U_c, t_c = exported_loop(ocp, x0, len(t_py), repeat)
-        print(f"  exported C closed-loop step min {1e3 * t_c.min():.3f} ms   median {1e3 * np.median(t_c):.3f} ms "
-              f"(target ≤ 1 ms; inputs vs Python's: max |ΔU| {np.max(np.abs(U_c - U_py[:, 0])):.1e} N)")
+        loops = exported_loop(ocp, x0, len(t_py), repeat, peer)
+        for tree, (U_c, t_c) in loops.items():
+            print(f"  exported C closed-loop step ({tree}) min {1e3 * t_c.min():.3f} ms   median "
+                  f"{1e3 * np.median(t_c):.3f} ms (target ≤ 1 ms; inputs vs Python's: max |ΔU| "
+                  f"{np.max(np.abs(U_c - U_py[:, 0])):.1e} N)")
+        if peer:
+            (_, t_c), (_, t_p) = loops.values()
+            print(f"  RATIO exported step this tree / peer: min {t_c.min() / t_p.min():.2f}, median "
+                  f"{np.median(t_c) / np.median(t_p):.2f}, median of the steps' ratios {np.median(t_c / t_p):.2f}")
 
 
 def main(argv=None) -> int:
@@ -279,13 +319,15 @@ def main(argv=None) -> int:
     ap.add_argument("--smoke", action="store_true", help="tiny sizes: check that the script runs")
     ap.add_argument("--mpc-only", action="store_true", help="only the cart-pole MPC")
     ap.add_argument("--export", action="store_true", help="also the exported C package's closed loop (builds it)")
+    ap.add_argument("--peer", metavar="ROOT", help="with --export: also the package exported by the ncgen tree ROOT "
+                    "(a checkout of main, say), the two packages' runs alternating")
     args = ap.parse_args(argv)
     if args.smoke:
         args.calls, args.repeat, args.bars = 5, 2, 3
     print(machine())
     if not args.mpc_only:
         step_jacobians(args.bars, args.calls, args.repeat)
-    cartpole_mpc(20 if args.smoke else 80, args.repeat, args.export)
+    cartpole_mpc(20 if args.smoke else 80, args.repeat, args.export or bool(args.peer), args.peer)
     print(f"load average at end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 
