@@ -29,8 +29,15 @@ def store(tmp_path, monkeypatch):
 
 def entries(store: Path) -> list[Path]:
     """The store's entries but the systems read from model files (``<key>-system.model``,
-    tested in tests/test_model_store.py)."""
-    return sorted(p for p in store.glob("*.model") if not p.name.endswith("-system.model")) if store.is_dir() else []
+    tested in tests/test_model_store.py) and the functions made after a model was stored
+    (``<key>-fn-<name>.model``, :func:`function_entries`)."""
+    return sorted(p for p in store.glob("*.model") if not p.name.endswith("-system.model")
+                  and "-fn-" not in p.name) if store.is_dir() else []
+
+
+def function_entries(store: Path, key: str) -> set[str]:
+    """The names of the functions stored beside the model ``key``."""
+    return {p.name[len(key) + 4:-len(".model")] for p in store.glob(f"{key}-fn-*.model")}
 
 
 def fresh(path, monkeypatch, **options):
@@ -295,3 +302,30 @@ def test_least_recently_used_entries_go_beyond_the_size_limit(store, monkeypatch
     monkeypatch.setattr(model_cache, "MAX_BYTES", 0)
     model_cache._prune(store, keep=used[2])      # never the entry just written
     assert [entry.is_file() for entry in used] == [False, False, True]
+
+
+def test_functions_made_after_the_store_are_stored_beside_the_model(store, monkeypatch):
+    """A model is stored with what its build made; ``poses`` (its maker needs the members'
+    derivations) is made on its first use, in a later process as here, stored then, and read
+    back by the next one without being made again; it equals a fresh build's bit for bit."""
+    from ncgen.model import function_set
+    path = str(EXAMPLES / "slider_crank.toml")
+    made = []
+    monkeypatch.setattr(function_set, "HOOKS", [made.append])
+    first = load_model(path)
+    key = first.data.store_key
+    assert "poses" not in first.functions.made() and function_entries(store, key) == set()
+    made.clear()
+    second = load_model(path)
+    R, p = second.functions["poses"](second.q0)
+    assert made == ["poses"] and function_entries(store, key) == {"poses"}
+    made.clear()
+    third = load_model(path)
+    R3, p3 = third.functions["poses"](third.q0)
+    assert made == []                   # read from its entry, not made
+    monkeypatch.setattr(function_set, "HOOKS", [])
+    Rf, pf = fresh(path, monkeypatch).functions["poses"](first.q0)
+    for x, y in ((R, Rf), (p, pf), (R3, Rf), (p3, pf)):
+        assert np.array_equal(np.array(x), np.array(y))
+    model_cache.clear()
+    assert not store.exists()
