@@ -179,7 +179,7 @@ def missing_units(kinds, unit: str = "forward") -> list[str]:
     """The units the algorithm unit ``unit`` needs for the joint kinds ``kinds`` (names,
     :func:`~ncgen.codegen.tree_kernels.units_of`) that are not compiled yet, or were not
     when this process started compiling them ahead (:func:`compile_ahead`: a run's choice does
-    not depend on how far that compile got)."""
+    not depend on how far that compile got, until the unit is first used)."""
     key = sources_key()
     return [u for u in units_of(unit, kinds)
             if (u, None) in _AHEAD or not library_ready(index_prefix(u), key, unit_cflags(u))]
@@ -227,6 +227,7 @@ def unit_library(unit: str, cflags: str | None = None) -> tuple[Path, bool]:
     ahead = _AHEAD.get((unit, cflags))
     if ahead is not None and ahead is not threading.current_thread():
         ahead.join()
+        del _AHEAD[(unit, cflags)]          # used: ready from now on, as after a compile of its own
     return cached_library(index_prefix(unit), sources_key(), partial(write_tree_unit, unit), f"{PACKAGE}_{unit}",
                           unit_cflags(unit, cflags))
 
