@@ -17,7 +17,9 @@ of every kind and their derivatives at -O2, one translation unit, 2.4 s the loop
 joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18; -O1 costs
 +9 % instructions per ABA against -O2 by callgrind, -Og +39 %), and without forward dynamics'
 Cholesky fallback (the inverse unit's, set when a tree first needs it: :meth:`TreeLibrary.set_fallback`):
-the whole forward unit's gcc 1.41 → 1.19 s of CPU (median of 5 interleaved, load 18).
+the whole forward unit's gcc 1.41 → 1.19 s of CPU (median of 5 interleaved, load 18).  ``ncgen simulate`` of a
+URDF robot starts that compile in a background thread before it reads the robot (:func:`compile_ahead`), so
+that gcc runs while Python reads, builds and stores the model.
 
 :class:`TableAlgorithm` is one algorithm of :data:`~ncgen.codegen.tree_check.ALGORITHMS`
 bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
