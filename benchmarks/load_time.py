@@ -41,6 +41,9 @@ followed by a MuJoCo and a Pinocchio load of the same robot in fresh processes (
     python benchmarks/load_time.py --rounds 3
     python benchmarks/load_time.py --smoke         slider_crank, 1 round (CI)
     python benchmarks/load_time.py --panda-only --rounds 3 --empty     first-ever runs
+    python benchmarks/load_time.py --panda-only --rounds 3 --empty --peer /tmp/main
+                       the same, each round also run with the ncgen tree at /tmp/main (e.g.
+                       ``git archive main | tar -x -C /tmp/main``), ratios this tree / peer printed
     python benchmarks/load_time.py --panda-only --rounds 3 --empty --python /tmp/v/bin/python
                        the same with the ncgen installed for that interpreter (``pip install .``: its
                        libraries compiled at install; no PYTHONPATH)
@@ -97,29 +100,45 @@ def summary(name: str, samples: list[tuple[float, float]]) -> str:
 
 
 def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict, per_version: Path | None,
-               kernels: str = "auto") -> dict[str, list[tuple[float, float]]]:
+               kernels: str = "auto", peer: str | None = None) -> dict[str, dict[str, list[tuple[float, float]]]]:
     """First, later and store-off runs of ``ncgen simulate model --kernels kernels`` (see the
-    module docstring); each fresh cache starts with the per-version libraries of ``per_version``
-    (None: empty)."""
+    module docstring), ``{tree: {label: samples}}``; each fresh cache starts with the
+    per-version libraries of ``per_version`` (None: empty).  With ``peer`` (the root of another
+    ncgen tree, run with ``PYTHONPATH`` set to it), each round runs this tree, then the peer."""
+    trees = {"this tree": base_env} if peer is None else \
+        {"this tree": base_env, "peer": {**base_env, "PYTHONPATH": peer}}
+    out = {tree: {"first run (empty cache)": [], "later runs (model stored)": [], "later runs, store off": [],
+                  FIRST_DERIVED: []} for tree in trees}
     cmd = [PYTHON[0], "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end), "--kernels", kernels]
-    out: dict[str, list[tuple[float, float]]] = {"first run (empty cache)": [], "later runs (model stored)": [],
-                                                 "later runs, store off": [], FIRST_DERIVED: []}
+    for env in trees.values():          # untimed: the bytecode of every module a run imports written
+        with tempfile.TemporaryDirectory(prefix="ncgen-warm-") as tmp:
+            run(cmd, {**env, "NCGEN_CACHE_DIR": f"{tmp}/cache"}, tmp)
+    for r in range(rounds):
+        for tree, env in trees.items():
+            for label, samples in _ncgen_round(model, t_end, env, per_version, kernels).items():
+                out[tree][label].append(samples)
+    return out
+
+
+def _ncgen_round(model: Path, t_end: float, base_env: dict, per_version: Path | None,
+                 kernels: str) -> dict[str, tuple[float, float]]:
+    """One round of :func:`ncgen_runs` in a fresh cache: ``{label: (wall, CPU)}``."""
+    cmd = [PYTHON[0], "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end), "--kernels", kernels]
+    out: dict[str, tuple[float, float]] = {}
     with tempfile.TemporaryDirectory(prefix="ncgen-load-") as tmp:
-        for r in range(rounds):
-            cache = f"{tmp}/cache{r}"
-            env = {**base_env, "NCGEN_CACHE_DIR": cache}
-            seed_per_version(per_version, Path(cache))
-            out["first run (empty cache)"].append(run(cmd, env, tmp)[:2])
-            for label, extra in (("later runs (model stored)", {}), ("later runs, store off", {"NCGEN_MODEL_CACHE": "0"})):
-                wall, cpu, text = run(cmd, {**env, **extra}, tmp)
-                out[label].append((wall, cpu))
-            stored = list(Path(cache, "models").glob("*.model"))
-            assert stored, f"{model.name}: nothing stored in {cache}/models"
-            for entry in Path(cache).iterdir():          # all but the derivations: a model never seen
-                if entry.name != "derivations":
-                    shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
-            seed_per_version(per_version, Path(cache))
-            out[FIRST_DERIVED].append(run(cmd, env, tmp)[:2])
+        cache = f"{tmp}/cache"
+        env = {**base_env, "NCGEN_CACHE_DIR": cache}
+        seed_per_version(per_version, Path(cache))
+        out["first run (empty cache)"] = run(cmd, env, tmp)[:2]
+        for label, extra in (("later runs (model stored)", {}), ("later runs, store off", {"NCGEN_MODEL_CACHE": "0"})):
+            out[label] = run(cmd, {**env, **extra}, tmp)[:2]
+        stored = list(Path(cache, "models").glob("*.model"))
+        assert stored, f"{model.name}: nothing stored in {cache}/models"
+        for entry in Path(cache).iterdir():          # all but the derivations: a model never seen
+            if entry.name != "derivations":
+                shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+        seed_per_version(per_version, Path(cache))
+        out[FIRST_DERIVED] = run(cmd, env, tmp)[:2]
     return out
 
 
@@ -260,6 +279,8 @@ def main() -> None:
                     "no Python or reference loads)")
     ap.add_argument("--empty", action="store_true", help="first runs from a completely empty cache (no "
                     "per-version library compiled before)")
+    ap.add_argument("--peer", help="with --panda-only: the root of another ncgen tree (e.g. a `git archive` of main), "
+                    "its runs interleaved round by round with this tree's, ratios printed")
     ap.add_argument("--python", help="run ncgen with this interpreter's installed ncgen (no PYTHONPATH; with "
                     "--panda-only)")
     args = ap.parse_args()
@@ -277,6 +298,9 @@ def main() -> None:
             env.pop("PYTHONPATH")
         run([PYTHON[0], "-c", "import ncgen, ncgen.cli, ncgen.codegen.model_cache"
              + ("" if args.python else ", mujoco, pinocchio")], env, pyc)
+        if args.peer:
+            run([PYTHON[0], "-c", "import ncgen, ncgen.cli, ncgen.codegen.model_cache"],
+                {**env, "PYTHONPATH": args.peer}, pyc)
         per_version = Path(pyc, "per-version")
         if args.empty:
             per_version = None
@@ -287,9 +311,20 @@ def main() -> None:
         for model in models:
             print(f"\n=== {model.stem}: ncgen simulate {model.name} --t-end {args.t_end:g}"
                   + (" (first runs from a completely empty cache)" if args.empty else ""))
-            results = ncgen_runs(model, args.t_end, rounds, env, per_version, args.kernels)
-            for label, samples in results.items():
-                print(summary(label, samples))
+            runs = ncgen_runs(model, args.t_end, rounds, env, per_version, args.kernels, args.peer)
+            for tree, results in runs.items():
+                if args.peer:
+                    print(f"  -- {tree}" + (f" ({args.peer})" if tree == "peer" else ""))
+                for label, samples in results.items():
+                    print(summary(label, samples))
+            if args.peer:
+                for label, samples in runs["this tree"].items():
+                    peer = runs["peer"][label]
+                    for i, what in ((1, "CPU"), (0, "wall")):
+                        mine, theirs = [x[i] for x in samples], [x[i] for x in peer]
+                        print(f"RATIO {label}, {what}, this tree / peer: min {min(mine) / min(theirs):.2f}, "
+                              f"median {statistics.median(mine) / statistics.median(theirs):.2f}")
+            results = runs["this tree"]
             first = statistics.median(s[0] for s in results["first run (empty cache)"])
             later = statistics.median(s[0] for s in results["later runs (model stored)"])
             off = statistics.median(s[1] for s in results["later runs, store off"])

@@ -29,8 +29,15 @@ def store(tmp_path, monkeypatch):
 
 def entries(store: Path) -> list[Path]:
     """The store's entries but the systems read from model files (``<key>-system.model``,
-    tested in tests/test_model_store.py)."""
-    return sorted(p for p in store.glob("*.model") if not p.name.endswith("-system.model")) if store.is_dir() else []
+    tested in tests/test_model_store.py) and the functions made after a model was stored
+    (``<key>-fn-<name>.model``, :func:`function_entries`)."""
+    return sorted(p for p in store.glob("*.model") if not p.name.endswith("-system.model")
+                  and "-fn-" not in p.name) if store.is_dir() else []
+
+
+def function_entries(store: Path, key: str) -> set[str]:
+    """The names of the functions stored beside the model ``key``."""
+    return {p.name[len(key) + 4:-len(".model")] for p in store.glob(f"{key}-fn-*.model")}
 
 
 def fresh(path, monkeypatch, **options):
@@ -295,3 +302,70 @@ def test_least_recently_used_entries_go_beyond_the_size_limit(store, monkeypatch
     monkeypatch.setattr(model_cache, "MAX_BYTES", 0)
     model_cache._prune(store, keep=used[2])      # never the entry just written
     assert [entry.is_file() for entry in used] == [False, False, True]
+
+
+def test_functions_made_after_the_store_are_stored_beside_the_model(store, monkeypatch):
+    """A model is stored with what its build made; ``poses`` (its maker needs the members'
+    derivations) is made on its first use, in a later process as here, stored then, and read
+    back by the next one without being made again; it equals a fresh build's bit for bit."""
+    from ncgen.model import function_set
+    path = str(EXAMPLES / "slider_crank.toml")
+    made = []
+    monkeypatch.setattr(function_set, "HOOKS", [made.append])
+    first = load_model(path)
+    key = first.data.store_key
+    assert "poses" not in first.functions.made() and function_entries(store, key) == set()
+    made.clear()
+    second = load_model(path)
+    R, p = second.functions["poses"](second.q0)
+    assert made == ["poses"] and function_entries(store, key) == {"poses"}
+    made.clear()
+    third = load_model(path)
+    R3, p3 = third.functions["poses"](third.q0)
+    assert made == []                   # read from its entry, not made
+    monkeypatch.setattr(function_set, "HOOKS", [])
+    Rf, pf = fresh(path, monkeypatch).functions["poses"](first.q0)
+    for x, y in ((R, Rf), (p, pf), (R3, Rf), (p3, pf)):
+        assert np.array_equal(np.array(x), np.array(y))
+    model_cache.clear()
+    assert not store.exists()
+
+
+def _bits(x) -> np.ndarray:
+    """The float64 bit patterns of a CasADi output (dense)."""
+    return np.ascontiguousarray(np.array(x, dtype=np.float64)).view(np.uint64)
+
+
+@pytest.mark.parametrize("path", ["chain.toml", "fourbar_planar.toml", "panda", "falling_chain.toml"])
+def test_every_sx_function_the_store_writes_reads_back_bit_for_bit(store, monkeypatch, path):
+    """The store writes SX functions without reading them back (CasADi's SX serialisation is a
+    list of scalar instructions): every SX function it writes for a chain, a four-bar, the
+    Panda URDF and a contact example — the model's own entry, the functions stored beside it
+    as they are made, the tree map — read back from disk in a new load evaluates bit for bit as
+    the function that was written, at random inputs."""
+    from ncgen.codegen.tree_check import tree_function
+
+    file = str(nc.robots.urdf_path("panda") if path == "panda" else EXAMPLES / path)
+    built = load_model(file)
+    key = built.data.store_key
+    written = {name: built.functions[name] for name in built.functions}      # the unmade ones stored now
+    assert function_entries(store, key) and set(function_entries(store, key)) < set(written)
+    if path == "panda":
+        written["joint-tree"] = tree_function(built)
+    made = []
+    monkeypatch.setattr(model_cache.FunctionStore, "write", lambda self, name, f: made.append(name))
+    again = load_model(file)
+    read = {name: again.functions[name] for name in again.functions}
+    assert made == []                   # every function read back: from the model's entry or beside it
+    if path == "panda":
+        read["joint-tree"] = tree_function(again)
+    rng = np.random.default_rng(11)
+    sx = [name for name, f in written.items() if f.class_name() == "SXFunction"]
+    assert len(sx) >= 8, sx
+    for name in sx:
+        f, g = written[name], read[name]
+        assert g is not f and g.class_name() == "SXFunction", name
+        for _ in range(3):
+            args = [rng.standard_normal(f.size_in(i)) for i in range(f.n_in())]
+            for x, y in zip(f.call(args), g.call(args), strict=True):
+                assert np.array_equal(_bits(x), _bits(y)), name

@@ -774,3 +774,50 @@ def test_sources_key_follows_an_edited_source(tmp_path, monkeypatch):
     first.write_bytes(text)
     os.utime(first, ns=(1, 1))
     assert tree_library.sources_key() == shipped
+
+
+def test_a_unit_compiled_ahead_is_compiled_once_and_leaves_the_choice_alone(tmp_path, monkeypatch):
+    """``compile_ahead`` compiles a missing unit in a background thread (one the process waits
+    for at exit); the unit's use waits for it and compiles nothing more; the run's choice still
+    sees the unit missing (what a run that found it missing chooses, however far the compile
+    got); nothing starts for a unit compiled already or without a compiler.  ``ncgen
+    simulate`` starts the forward unit for a URDF run in joint space on the tables only."""
+    import argparse
+    import threading
+
+    import ncgen.runtime.tree_library as tl
+    from ncgen.cli import simulate as cli_simulate
+
+    monkeypatch.setattr(tl, "_AHEAD", {})
+    release, calls, built = threading.Event(), [], []
+
+    def compile_(prefix, source, write, package, cflags=None):
+        if built:
+            return built[0], False
+        calls.append((prefix, threading.current_thread().name))
+        assert release.wait(30)
+        built.append(tmp_path / package)
+        return built[0], True
+
+    monkeypatch.setattr(tl, "cached_library", compile_)
+    monkeypatch.setattr(tl, "library_ready", lambda prefix, source, cflags=None: bool(built))
+    monkeypatch.setattr(tl, "compiler_path", lambda: "/usr/bin/cc")
+    assert tl.compile_ahead(["forward"]) == ["forward"] and tl.compile_ahead(["forward"]) == []
+    thread = tl._AHEAD[("forward", None)]
+    assert not thread.daemon and tl.missing_units(["revolute"]) == ["forward"]
+    threading.Timer(0.3, release.set).start()
+    assert tl.unit_library("forward") == (tmp_path / f"{tl.PACKAGE}_forward", False)       # waited for, found
+    assert not thread.is_alive()
+    assert calls == [("tree-tables-forward", "ncgen-compile-ahead")]
+    assert tl.missing_units(["revolute"]) == [] and tl.compile_ahead(["forward"]) == []    # used: ready
+    built.clear()
+    monkeypatch.setattr(tl, "compiler_path", lambda: None)
+    assert tl.compile_ahead(["forward"]) == [] and tl._AHEAD == {}                          # no compiler
+    started = []
+    monkeypatch.setattr(tl, "compile_ahead", started.append)
+    run = dict(model="robot.urdf", method="auto", kernels="auto", controller=None, joint_dynamics=False,
+               backend="auto")
+    for change in ({}, {"method": "joint"}, {"kernels": "tables"}, {"model": "chain.toml"}, {"method": "idas"},
+                   {"kernels": "flat"}, {"controller": "kind = 'pd'"}, {"joint_dynamics": True}, {"backend": "vm"}):
+        cli_simulate._compile_ahead(argparse.Namespace(**{**run, **change}))
+    assert started == [("forward",)] * 3

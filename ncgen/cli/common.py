@@ -173,7 +173,7 @@ def load_model(path: str, params: list[str] | None = None, contacts: str = "smoo
         except NcgenError as e:
             raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
 
-    return model_cache.cached(key, build, complete=True)       # a later run derives nothing
+    return model_cache.cached(key, build)       # what a run makes is stored as made: a later run derives nothing
 
 
 def load_system(path: str, params: list[str] | None = None, floating_base: bool = False,

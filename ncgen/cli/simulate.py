@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ncgen.cli.common import check_files, file_arguments, load_model, model_arguments
 from ncgen.cli.registry import subcommand
@@ -81,6 +82,20 @@ def _controller(text: str):
     return controller_from_dict(data, "--controller")
 
 
+def _compile_ahead(args: argparse.Namespace) -> None:
+    """A URDF robot (a tree without contacts) runs in joint space on the tree tables unless the
+    options say otherwise: its first run compiles the tree library's forward unit (once per
+    ncgen version), started here in the background so that gcc runs while the robot is read and
+    built (:func:`~ncgen.runtime.tree_library.compile_ahead`; the run's choice of kernels is
+    that of a run that found the unit missing)."""
+    if Path(args.model).suffix.lower() != ".urdf" or args.method not in ("auto", "joint") or \
+            args.kernels == "flat" or args.controller or args.joint_dynamics or args.backend == "vm":
+        return
+    from ncgen.runtime.tree_library import compile_ahead
+
+    compile_ahead(("forward",))
+
+
 @subcommand(
     "simulate",
     help="simulate a model: trajectory, plot, animation",
@@ -116,6 +131,7 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.runtime import simulate as run
 
     check_files(args, parser, OUTPUTS)
+    _compile_ahead(args)
     model = load_model(args.model, args.param, args.contacts, floating_base=args.floating_base,
                        mjcf_contacts=args.mjcf_contacts)
     try:

@@ -17,6 +17,12 @@ Entries are written to a temporary sibling and renamed into place
 version and key and its payload has the recorded sha256; anything else (truncated, garbage,
 another version) is ignored, removed and rebuilt, with a note on stderr.
 
+A model is stored with the functions its build made; the others stay lazy (their makers
+pickled, :mod:`ncgen.model.function_set`) and each, made on first use in any process, is
+stored beside the model (``<key>-fn-<name>.model``, its CasADi serialisation) and read from
+there by the next process (:class:`FunctionStore`): a later run makes nothing that an earlier
+one made, and a run pays only for the functions it uses.
+
 Beyond :data:`MAX_BYTES` the least recently used entries are removed after a write.
 ``NCGEN_MODEL_CACHE=0`` (or ``off``, ``no``, ``false``) bypasses the store (nothing is read or
 written); :func:`clear` empties it, as ``rm -r <cache_dir>/models`` does.
@@ -109,15 +115,13 @@ def system_key(system, **options) -> str | None:
     return None if digest is None else key_of({"system": digest})
 
 
-def cached(key: str | None, build: Callable[[], object], complete: bool = False):
+def cached(key: str | None, build: Callable[[], object]):
     """The model stored under ``key``, else ``build()`` stored under it (nothing is stored
     or read with ``key`` None or the store off).  The warnings the build gave (e.g. redundant
     constraints dropped) are stored with the model and given again when it is read back.
-    ``complete``: every function of ``model.functions`` is made before it is stored (what a
-    run of the command line needs, so that a later run derives nothing); otherwise those the
-    build made and :data:`STORED_FUNCTIONS`, the others staying lazy (see :func:`save`)."""
-    return _through_store(key, build, lambda: load(key),
-                          lambda model, said: save(key, model, said, complete=complete), stacklevel=3)
+    Functions of ``model.functions`` made later are stored beside it as they are made (see
+    :func:`save`)."""
+    return _through_store(key, build, lambda: load(key), lambda model, said: save(key, model, said), stacklevel=3)
 
 
 def _through_store(key: str | None, make: Callable[[], object], read: Callable[[], tuple | None],
@@ -200,42 +204,77 @@ def load(key: str) -> tuple | None:
 
     hit = _read(_path(key), key, decode)
     if hit is not None:
-        hit[0].data.store_key = key
+        _keep(hit[0], key)
     return hit
 
 
-#: Functions made before a model is stored even when it is not stored complete: their makers
-#: need the members' SymPy derivations, which a later process would otherwise derive again.
-STORED_FUNCTIONS = ("markers", "poses")
-
-
-def save(key: str, model, said=(), complete: bool = False) -> bool:
+def save(key: str, model, said=()) -> bool:
     """Store ``model`` under ``key`` with the warnings ``said`` by its build (``[(category,
     message)]``); False (and nothing written) if its state cannot be pickled, a made MX
     function cannot be read back from its serialisation (an SX function, a list of scalar
-    instructions, always can), or the store cannot be written.  The functions already made
-    and :data:`STORED_FUNCTIONS` are stored made (all of them with ``complete``); the others
-    keep their makers, which a later process runs on first use from the stored ones
-    (composites, ``Minv``: no SymPy)."""
-    import casadi
-
+    instructions, always can: tests/test_model_cache.py checks it bit for bit), or the store
+    cannot be written.  The functions already made are stored made; the others keep their
+    makers (those that do not pickle are run first, :meth:`~ncgen.model.function_set.FunctionSet.reduced`)
+    and are stored beside the model when first made, here or in a later process
+    (:class:`FunctionStore`)."""
     from ncgen.model.model import model_state
 
     try:
-        for name in (model.functions if complete else STORED_FUNCTIONS):
-            if name in model.functions:
-                model.functions[name]
         texts = {name: model.functions[name].serialize() for name in model.functions.made()}
-        for name, text in texts.items():         # CasADi 3.8 writes some solves (MX) it cannot read back
-            if model.functions[name].class_name() != "SXFunction":
-                casadi.Function.deserialize(text)
+        for name, text in texts.items():
+            _read_back(model.functions[name], text)
         payload = _pickle({"state": model_state(model), "warnings": list(said)}, (model.functions, texts))
     except Exception:                      # noqa: BLE001 — e.g. a Python function inside a force
         return False
     if not _write(_path(key), key, payload):
         return False
-    model.data.store_key = key
+    _keep(model, key)
     return True
+
+
+def _read_back(f, text: str) -> None:
+    """Raise if the MX function ``f`` cannot be read back from its serialisation ``text``
+    (CasADi 3.8 writes some solves it cannot read back); an SX function always can."""
+    import casadi
+
+    if f.class_name() != "SXFunction":
+        casadi.Function.deserialize(text)
+
+
+def _keep(model, key: str) -> None:
+    """``model`` came through the store under ``key``: its functions made from now on are stored beside it."""
+    model.data.store_key = key
+    model.functions.keep_in(FunctionStore(key))
+
+
+class FunctionStore:
+    """The functions of the stored model ``key`` made after it was stored, one entry each
+    (``<key>-fn-<name>.model``: the CasADi serialisation), the store a
+    :class:`~ncgen.model.function_set.FunctionSet` reads a function from before making it and
+    writes it to once made (:meth:`~ncgen.model.function_set.FunctionSet.keep_in`)."""
+
+    def __init__(self, key: str):
+        self.key = key
+
+    def read(self, name: str):
+        """The function ``name`` stored beside the model, or None."""
+        import casadi
+
+        if not enabled():
+            return None
+        return _read(_path(self.key, f"fn-{name}"), self.key, lambda payload: casadi.Function.deserialize(
+            payload.decode()))
+
+    def write(self, name: str, f) -> None:
+        """Store ``f`` (unless it cannot be read back, or the store is off or cannot be written)."""
+        if not enabled():
+            return
+        text = f.serialize()
+        try:
+            _read_back(f, text)
+        except Exception:                  # noqa: BLE001 — not stored: made again next time
+            return
+        _write(_path(self.key, f"fn-{name}"), self.key, text.encode())
 
 
 def derived_function(model, what: str, build: Callable[[], object]):

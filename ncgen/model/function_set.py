@@ -14,7 +14,9 @@ functions).  Pickling (the store of built models, :mod:`ncgen.codegen.model_cach
 maker lazy only when it is a :class:`functools.partial` of a module-level function (its
 arguments numbers, arrays, CasADi matrices or functions, which pickle); any other maker (a
 closure over the assembly's expressions) is run first, and every function made travels as
-its CasADi serialisation, deserialised on its first access after reading.
+its CasADi serialisation, deserialised on its first access after reading.  A set may be
+given a *store* (:meth:`FunctionSet.keep_in`, the store of built models: not pickled) that a
+function still to make is first read from, and that each function made is written to.
 """
 from __future__ import annotations
 
@@ -38,6 +40,7 @@ class FunctionSet(Mapping):
         self._makers = {k: m for k, m in makers.items() if k not in made}
         self._made = made
         self._lock = threading.RLock()
+        self._store = None
 
     def __getitem__(self, name: str):
         f = self._made.get(name)
@@ -49,11 +52,22 @@ class FunctionSet(Mapping):
                 maker = self._makers.get(name)
                 if maker is None:
                     raise KeyError(name)
-                f = maker(self)
+                store = None if isinstance(maker, functools.partial) and maker.func is deserialized else self._store
+                f = None if store is None else store.read(name)
+                if f is None:
+                    f = maker(self)
+                    for hook in HOOKS:
+                        hook(name)
+                    if store is not None:
+                        store.write(name, f)
                 self._made[name] = f
-                for hook in HOOKS:
-                    hook(name)
         return f
+
+    def keep_in(self, store) -> None:
+        """Read the functions still to make from ``store`` first (``store.read(name)``: the
+        function or None) and write each function then made to it (``store.write(name, f)``);
+        functions already made, or read back from this set's pickle, do not go through it."""
+        self._store = store
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._names)

@@ -17,7 +17,9 @@ of every kind and their derivatives at -O2, one translation unit, 2.4 s the loop
 joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18; -O1 costs
 +9 % instructions per ABA against -O2 by callgrind, -Og +39 %), and without forward dynamics'
 Cholesky fallback (the inverse unit's, set when a tree first needs it: :meth:`TreeLibrary.set_fallback`):
-the whole forward unit's gcc 1.41 → 1.19 s of CPU (median of 5 interleaved, load 18).
+the whole forward unit's gcc 1.41 → 1.19 s of CPU (median of 5 interleaved, load 18).  ``ncgen simulate`` of a
+URDF robot starts that compile in a background thread before it reads the robot (:func:`compile_ahead`), so
+that gcc runs while Python reads, builds and stores the model.
 
 :class:`TableAlgorithm` is one algorithm of :data:`~ncgen.codegen.tree_check.ALGORITHMS`
 bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
@@ -66,7 +68,7 @@ from ncgen.codegen.tree_kernels import (ALGORITHM_UNITS, JOINT_KINDS, PACKAGE, S
 from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
 from ncgen.interrupts import call_interruptibly
-from ncgen.runtime.table_library import cached_library, library_ready
+from ncgen.runtime.table_library import cached_library, compiler_path, library_ready
 from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL, quaternion_offsets
 from ncgen.validation import MAX_MAGNITUDE
 from ncgen.version import __version__
@@ -177,9 +179,12 @@ def unit_ready(unit: str) -> bool:
 
 def missing_units(kinds, unit: str = "forward") -> list[str]:
     """The units the algorithm unit ``unit`` needs for the joint kinds ``kinds`` (names,
-    :func:`~ncgen.codegen.tree_kernels.units_of`) that are not compiled yet."""
+    :func:`~ncgen.codegen.tree_kernels.units_of`) that are not compiled yet, or were not
+    when this process started compiling them ahead (:func:`compile_ahead`: a run's choice does
+    not depend on how far that compile got, until the unit is first used)."""
     key = sources_key()
-    return [u for u in units_of(unit, kinds) if not library_ready(index_prefix(u), key, unit_cflags(u))]
+    return [u for u in units_of(unit, kinds)
+            if (u, None) in _AHEAD or not library_ready(index_prefix(u), key, unit_cflags(u))]
 
 
 def tree_library_ready() -> bool:
@@ -187,9 +192,44 @@ def tree_library_ready() -> bool:
     return not [u for u in (*ALGORITHM_UNITS, *kernel_units()) if not unit_ready(u)]
 
 
+#: The units this process started compiling ahead of their first use (:func:`compile_ahead`):
+#: ``(unit, cflags) -> the thread compiling it``.
+_AHEAD: dict[tuple[str, str | None], threading.Thread] = {}
+
+
+def compile_ahead(units) -> list[str]:
+    """Start compiling those of the units ``units`` (default flags) that are not compiled yet,
+    in a background thread, so that gcc runs while the caller goes on (reading and building a
+    model); the unit's first use waits for that compile (:func:`unit_library`), and a compile
+    that failed there is done again, and fails, at that use.  Returns the units started
+    (none without a compiler).  The process waits for the thread before it exits."""
+    if compiler_path() is None:
+        return []
+    key = sources_key()
+    started = [u for u in units if (u, None) not in _AHEAD and not library_ready(index_prefix(u), key, unit_cflags(u))]
+    if started:
+        thread = threading.Thread(target=_compile_units, args=(started,), name="ncgen-compile-ahead")
+        _AHEAD.update({(u, None): thread for u in started})
+        thread.start()
+    return started
+
+
+def _compile_units(units) -> None:
+    for unit in units:
+        try:
+            unit_library(unit)
+        except Exception:       # noqa: BLE001 — compiled again at the unit's use, which raises it
+            return
+
+
 def unit_library(unit: str, cflags: str | None = None) -> tuple[Path, bool]:
     """``(path of the unit's library, whether it was compiled now)``: compiled at first use
-    (algorithm units with :data:`UNIT_CFLAGS` unless ``cflags`` or ``$NCGEN_CFLAGS`` is given)."""
+    (algorithm units with :data:`UNIT_CFLAGS` unless ``cflags`` or ``$NCGEN_CFLAGS`` is given),
+    after the compile started ahead of it (:func:`compile_ahead`) has ended."""
+    ahead = _AHEAD.get((unit, cflags))
+    if ahead is not None and ahead is not threading.current_thread():
+        ahead.join()
+        del _AHEAD[(unit, cflags)]          # used: ready from now on, as after a compile of its own
     return cached_library(index_prefix(unit), sources_key(), partial(write_tree_unit, unit), f"{PACKAGE}_{unit}",
                           unit_cflags(unit, cflags))
 
