@@ -6,13 +6,13 @@ choice that does not exist is an error, never silently replaced by another compi
 """
 from __future__ import annotations
 
-import os
 import shlex
 import shutil
 import subprocess
 from dataclasses import dataclass
 from functools import lru_cache
 
+from ncgen.environment import getenv
 from ncgen.errors import CompilerNotFound
 
 CANDIDATES = ("cc", "gcc", "clang")
@@ -29,7 +29,7 @@ class Compiler:
 def find_compiler(cc: str | None = None) -> Compiler:
     """The compiler to use (see module docstring); raises :class:`CompilerNotFound`.  Found
     once per ``cc``, ``$CC`` and ``$PATH`` (a run's kernel choice asks on every call)."""
-    return _find(cc, os.environ.get("CC"), os.environ.get("PATH"))
+    return _find(cc, getenv("CC"), getenv("PATH"))
 
 
 @lru_cache(maxsize=16)

@@ -1,0 +1,20 @@
+"""The process's environment variables read in ~0.1 µs, where ``os.environ.get`` costs
+1–5 µs (a missing key raises and catches a ``KeyError`` inside ``Mapping.get``): for the
+variables a run reads on every call (``$CC``, ``$PATH``, ``$NCGEN_MAX_BYTES``,
+``$NCGEN_PROGRESS``).  The same values as ``os.environ`` (which keeps its dict of encoded
+items up to date on every change made through it); where that dict is not there (another
+Python), ``os.environ.get`` itself."""
+from __future__ import annotations
+
+import os
+
+_DATA = getattr(os.environ, "_data", None)
+_FAST = os.name == "posix" and type(_DATA) is dict
+
+
+def getenv(name: str, default: str | None = None) -> str | None:
+    """``os.environ.get(name, default)``."""
+    if not _FAST:
+        return os.environ.get(name, default)
+    value = _DATA.get(name.encode("utf-8", "surrogateescape"))
+    return default if value is None else os.fsdecode(value)
