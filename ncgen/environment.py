@@ -14,7 +14,16 @@ _FAST = os.name == "posix" and type(_DATA) is dict
 
 def getenv(name: str, default: str | None = None) -> str | None:
     """``os.environ.get(name, default)``."""
-    if not _FAST:
-        return os.environ.get(name, default)
-    value = _DATA.get(name.encode("utf-8", "surrogateescape"))
-    return default if value is None else os.fsdecode(value)
+    value = getenv_key(name)
+    return default if value is None else decoded(value)
+
+
+def getenv_key(name: str) -> bytes | str | None:
+    """The value of ``name`` as :func:`decoded` takes it, or None: the environment's own
+    object, the same one until the variable changes (a cache key whose hash is computed once)."""
+    return _DATA.get(name.encode("utf-8", "surrogateescape")) if _FAST else os.environ.get(name)
+
+
+def decoded(value: bytes | str) -> str:
+    """A value of :func:`getenv_key` as text."""
+    return os.fsdecode(value) if type(value) is bytes else value

@@ -303,6 +303,44 @@ def test_the_time_grid_is_fresh_per_run_and_the_formula_of_the_docs():
     assert b is not time_grid(0.5, 1.25, 0.1)
 
 
+def test_a_kept_grid_still_honours_a_changed_allocation_limit(monkeypatch):
+    """The checked grid is kept per arguments and ``$NCGEN_MAX_BYTES``: a grid computed under
+    the default limit is refused once the limit is lowered below its size (naming the grid and
+    the variable), and computed again when the limit is lifted."""
+    from ncgen.runtime.inputs import time_grid
+
+    assert len(time_grid(0.0, 1.0, 1e-3, bytes_per_point=100.0)) == 1001
+    monkeypatch.setenv("NCGEN_MAX_BYTES", "1000")
+    with pytest.raises(nc.NcgenError, match=r"output grid t0 = 0 \.\.\. t_end = 1 s .*NCGEN_MAX_BYTES"):
+        time_grid(0.0, 1.0, 1e-3, bytes_per_point=100.0)
+    monkeypatch.delenv("NCGEN_MAX_BYTES")
+    assert len(time_grid(0.0, 1.0, 1e-3, bytes_per_point=100.0)) == 1001
+
+
+def test_environment_variables_read_fast_equal_os_environ_and_follow_its_changes(monkeypatch):
+    """``ncgen.environment.getenv`` answers as ``os.environ.get`` for a set, a changed, a
+    removed and a non-ASCII value, and the compiler follows a change of ``$CC`` made through
+    ``os.environ`` (a missing one is refused naming ``$CC``)."""
+    from ncgen.codegen.compiler import find_compiler
+    from ncgen.environment import getenv
+    from ncgen.errors import CompilerNotFound
+
+    name = "NCGEN_TEST_START38"
+    monkeypatch.delenv(name, raising=False)
+    assert getenv(name) is None and getenv(name, "d") == "d"
+    for value in ("1", "", "caf\u00e9 \u2192 x", "2"):
+        monkeypatch.setenv(name, value)
+        assert getenv(name) == os.environ.get(name) == value
+    monkeypatch.delenv(name)
+    assert getenv(name, "gone") == "gone"
+    assert getenv("PATH") == os.environ.get("PATH")
+    monkeypatch.setenv("CC", "ncgen-no-such-compiler")
+    with pytest.raises(CompilerNotFound, match=r"'ncgen-no-such-compiler' from \$CC"):
+        find_compiler()
+    monkeypatch.delenv("CC")
+    find_compiler()                               # the default compiler again (the suite needs one)
+
+
 def _raise_sigint_and_wait(stop, after: float = 0.0, seconds: float = 5.0) -> int:
     """SIGINT to this process ``after`` s, then wait (GIL released) until ``stop`` is set: 7 if
     it was."""
