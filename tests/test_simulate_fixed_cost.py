@@ -382,3 +382,44 @@ def test_ctrl_c_during_a_call_sets_the_stop_flag_and_the_handler_runs_after():
     finally:
         signal.signal(signal.SIGINT, previous)
     assert call_interruptibly(lambda: 3, stop=ctypes.c_int(0)) == (3, False)
+
+
+def test_a_prepared_run_is_reused_and_a_changed_option_grid_tolerance_or_compiler_makes_a_new_one(monkeypatch):
+    """What a joint run derives from its arguments but not from its start
+    (:func:`~ncgen.runtime.joint_simulation.prepared_run`) is made once per options, output
+    count, controller and compiler: each run equals, bit for bit and in its ``info``, the same
+    run with a prepared run made afresh, and a changed tolerance, grid, integrator, substeps or
+    ``$CC`` is honoured (the info says it, the grid is the one asked for)."""
+    model = spatial_chain()
+    q0, v0 = model.from_joint_space(np.array([0.3, -0.7, 1.1]), np.array([1.5, -0.4, 2.0]))
+    kept = js_module.model_data(model).prepared_runs
+    cases = [dict(t_end=0.2, dt=0.05, rtol=1e-6, atol=1e-6), dict(t_end=0.2, dt=0.05, rtol=1e-6, atol=1e-6),
+             dict(t_end=0.2, dt=0.05, rtol=1e-9, atol=1e-11), dict(t_end=0.3, dt=0.05, rtol=1e-6, atol=1e-6),
+             dict(t_end=0.2, dt=0.04, rtol=1e-6, atol=1e-6), dict(t_end=0.2, dt=0.05, integrator="rk4", substeps=4),
+             dict(t_end=0.2, dt=0.05, integrator="rk4", substeps=9)]
+    runs = [nc.simulate(model, q0=q0, v0=v0, method="joint", **c) for c in cases]
+    assert len(kept) == len(cases) - 1                  # the repeated case reused its prepared run
+    monkeypatch.setattr(js_module, "prepared_run", js_module.PreparedRun)
+    for c, run in zip(cases, runs):
+        ref = nc.simulate(model, q0=q0, v0=v0, method="joint", **c)
+        np.testing.assert_array_equal(run.qj, ref.qj)
+        np.testing.assert_array_equal(run.t, ref.t)
+        np.testing.assert_allclose(run.t, np.arange(len(run.t)) * c["dt"], rtol=0, atol=1e-15)
+        assert run.t[-1] == c["t_end"]
+        drop = ("build_time", "wall_time")
+        assert {k: v for k, v in run.info.items() if k not in drop} == \
+            {k: v for k, v in ref.info.items() if k not in drop}
+        assert list(run.info) == list(ref.info)
+        if "rtol" in c:
+            assert (run.info["rtol"], run.info["atol"]) == (c["rtol"], c["atol"])
+        else:
+            assert run.info["substeps"] == c["substeps"] and run.info["h"] == pytest.approx(c["dt"] / c["substeps"])
+    monkeypatch.undo()
+    monkeypatch.setenv("CC", "no-such-compiler-ncgen")
+    compiler._find.cache_clear()
+    without = nc.simulate(model, q0=q0, v0=v0, method="joint", **cases[0])
+    assert without.info["kernels_reason"] == "no C compiler"
+    np.testing.assert_array_equal(without.qj, runs[0].qj)
+    monkeypatch.delenv("CC")
+    assert nc.simulate(model, q0=q0, v0=v0, method="joint", **cases[0]).info["kernels_reason"] == \
+        runs[0].info["kernels_reason"] != "no C compiler"
