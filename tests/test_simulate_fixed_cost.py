@@ -423,3 +423,22 @@ def test_a_prepared_run_is_reused_and_a_changed_option_grid_tolerance_or_compile
     monkeypatch.delenv("CC")
     assert nc.simulate(model, q0=q0, v0=v0, method="joint", **cases[0]).info["kernels_reason"] == \
         runs[0].info["kernels_reason"] != "no C compiler"
+
+
+def test_the_joint_states_are_copies_made_when_read_and_editing_them_changes_nothing_else(chain):
+    """``traj.qj``/``traj.vj`` of a joint run are made when first read, as copies: edited
+    before the natural coordinates are derived, those still equal ``from_joint_space`` of the
+    run's joint states (a second run's), and a pickle keeps the edit."""
+    model, q0, v0 = chain
+    run = lambda: nc.simulate(model, 0.2, 0.05, q0=q0, v0=v0, method="joint", rtol=1e-8, atol=1e-10)  # noqa: E731
+    edited, reference = run(), run()
+    assert callable(edited._arrays["qj"])                   # not made yet
+    edited.qj[:] += 1.0
+    edited.vj[:] -= 2.0
+    np.testing.assert_array_equal(edited.qj, reference.qj + 1.0)
+    np.testing.assert_array_equal(edited.q, reference.q)
+    np.testing.assert_array_equal(edited.v, reference.v)
+    q, v = model.from_joint_space(reference.qj[-1], reference.vj[-1])
+    np.testing.assert_allclose(edited.q[-1], q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(edited.v[-1], v, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(edited)).vj, reference.vj - 2.0)

@@ -513,7 +513,7 @@ def _feedback(model, feedback, t: float, x: np.ndarray, p) -> np.ndarray:
 def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring); ``X``
     and ``W`` are the run's own arrays, which the lazy outputs keep (``traj.qj``, ``traj.vj``
-    are copies: editing them changes nothing else)."""
+    too: copies made when first read, so editing them changes nothing else)."""
     js = model.joint_space
     n = len(t)
     W = W[:n]
@@ -526,5 +526,5 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
         lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,
                                                  P())[1]).T.reshape(n, model.nc),
         applied, p, info)
-    traj.qj, traj.vj = X[:, :js.nq].copy(), X[:, js.nq:].copy()
+    traj.qj, traj.vj = (lambda: X[:, :js.nq].copy()), (lambda: X[:, js.nq:].copy())
     return traj
