@@ -7,9 +7,10 @@ turns every bar off.  Bars are cleared when closed, so logs and captured output 
 """
 from __future__ import annotations
 
-import os
 import sys
 import threading
+
+from ncgen.environment import getenv
 
 DELAY = 2.0
 
@@ -22,7 +23,7 @@ def enabled(mode: bool | None = None) -> bool:
         isatty = getattr(sys.stderr, "isatty", None)
         if not (isatty and isatty()):
             return False
-    return os.environ.get("NCGEN_PROGRESS", "") != "0"
+    return getenv("NCGEN_PROGRESS", "") != "0"
 
 
 def bar(total: float | None, desc: str, unit: str = "it", mode: bool | None = None, **kw):

@@ -18,12 +18,12 @@ TOML loader and the command line all go through these, so one input is judged by
 from __future__ import annotations
 
 import math
-import os
 import re
 import warnings
 
 import numpy as np
 
+from ncgen.environment import getenv
 from ncgen.errors import InertiaError, InvalidName, NcgenError, RotationError, ShapeError
 
 ROTATION_TOL = 1e-9
@@ -80,7 +80,7 @@ def allocation(n_bytes: float, what, hint: str) -> None:
     """Refuse an allocation of ``n_bytes`` above :data:`MAX_ALLOCATION` (or
     ``$NCGEN_MAX_BYTES``), saying how much it would need (``what``: the text, or a function
     making it only then) and ``hint`` (what to change)."""
-    limit = float(os.environ.get("NCGEN_MAX_BYTES", MAX_ALLOCATION))
+    limit = float(getenv("NCGEN_MAX_BYTES", MAX_ALLOCATION))
     if n_bytes > limit:
         what = what() if callable(what) else what
         raise NcgenError(f"{what} would need {_bytes(n_bytes)} of memory, more than the limit of "

@@ -4,7 +4,7 @@ Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever
 (module level or inside a function).  The layer order, lowest first (also in
 docs/architecture.md)::
 
-    base (errors, validation, reproducible, files, interrupts, version, robots, progress, blas_threads)
+    base (errors, validation, reproducible, files, interrupts, version, robots, progress, blas_threads, environment)
     ← symbolic ← model ← rigid_motion ← assembly ← codegen ← runtime ← analysis ← viz ← optim ← control ← cli
     ← ncgen (the package root)
 
@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 LAYERS = ["base", "symbolic", "model", "rigid_motion", "assembly", "codegen", "runtime", "analysis", "viz", "optim",
           "control", "cli", "root"]
 BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version", "robots", "progress",
-        "blas_threads"}
+        "blas_threads", "environment"}
 #: (importing module, imported module): the documented exceptions.
 EXCEPTIONS = {("ncgen.model.system", "ncgen.codegen.model_cache"), ("ncgen.model.model", "ncgen.assembly.manifold"),
               ("ncgen.runtime.trajectory", "ncgen.analysis.reactions"),

@@ -303,6 +303,44 @@ def test_the_time_grid_is_fresh_per_run_and_the_formula_of_the_docs():
     assert b is not time_grid(0.5, 1.25, 0.1)
 
 
+def test_a_kept_grid_still_honours_a_changed_allocation_limit(monkeypatch):
+    """The checked grid is kept per arguments and ``$NCGEN_MAX_BYTES``: a grid computed under
+    the default limit is refused once the limit is lowered below its size (naming the grid and
+    the variable), and computed again when the limit is lifted."""
+    from ncgen.runtime.inputs import time_grid
+
+    assert len(time_grid(0.0, 1.0, 1e-3, bytes_per_point=100.0)) == 1001
+    monkeypatch.setenv("NCGEN_MAX_BYTES", "1000")
+    with pytest.raises(nc.NcgenError, match=r"output grid t0 = 0 \.\.\. t_end = 1 s .*NCGEN_MAX_BYTES"):
+        time_grid(0.0, 1.0, 1e-3, bytes_per_point=100.0)
+    monkeypatch.delenv("NCGEN_MAX_BYTES")
+    assert len(time_grid(0.0, 1.0, 1e-3, bytes_per_point=100.0)) == 1001
+
+
+def test_environment_variables_read_fast_equal_os_environ_and_follow_its_changes(monkeypatch):
+    """``ncgen.environment.getenv`` answers as ``os.environ.get`` for a set, a changed, a
+    removed and a non-ASCII value, and the compiler follows a change of ``$CC`` made through
+    ``os.environ`` (a missing one is refused naming ``$CC``)."""
+    from ncgen.codegen.compiler import find_compiler
+    from ncgen.environment import getenv
+    from ncgen.errors import CompilerNotFound
+
+    name = "NCGEN_TEST_START38"
+    monkeypatch.delenv(name, raising=False)
+    assert getenv(name) is None and getenv(name, "d") == "d"
+    for value in ("1", "", "caf\u00e9 \u2192 x", "2"):
+        monkeypatch.setenv(name, value)
+        assert getenv(name) == os.environ.get(name) == value
+    monkeypatch.delenv(name)
+    assert getenv(name, "gone") == "gone"
+    assert getenv("PATH") == os.environ.get("PATH")
+    monkeypatch.setenv("CC", "ncgen-no-such-compiler")
+    with pytest.raises(CompilerNotFound, match=r"'ncgen-no-such-compiler' from \$CC"):
+        find_compiler()
+    monkeypatch.delenv("CC")
+    find_compiler()                               # the default compiler again (the suite needs one)
+
+
 def _raise_sigint_and_wait(stop, after: float = 0.0, seconds: float = 5.0) -> int:
     """SIGINT to this process ``after`` s, then wait (GIL released) until ``stop`` is set: 7 if
     it was."""
@@ -344,3 +382,63 @@ def test_ctrl_c_during_a_call_sets_the_stop_flag_and_the_handler_runs_after():
     finally:
         signal.signal(signal.SIGINT, previous)
     assert call_interruptibly(lambda: 3, stop=ctypes.c_int(0)) == (3, False)
+
+
+def test_a_prepared_run_is_reused_and_a_changed_option_grid_tolerance_or_compiler_makes_a_new_one(monkeypatch):
+    """What a joint run derives from its arguments but not from its start
+    (:func:`~ncgen.runtime.joint_simulation.prepared_run`) is made once per options, output
+    count, controller and compiler: each run equals, bit for bit and in its ``info``, the same
+    run with a prepared run made afresh, and a changed tolerance, grid, integrator, substeps or
+    ``$CC`` is honoured (the info says it, the grid is the one asked for)."""
+    model = spatial_chain()
+    q0, v0 = model.from_joint_space(np.array([0.3, -0.7, 1.1]), np.array([1.5, -0.4, 2.0]))
+    kept = js_module.model_data(model).prepared_runs
+    cases = [dict(t_end=0.2, dt=0.05, rtol=1e-6, atol=1e-6), dict(t_end=0.2, dt=0.05, rtol=1e-6, atol=1e-6),
+             dict(t_end=0.2, dt=0.05, rtol=1e-9, atol=1e-11), dict(t_end=0.3, dt=0.05, rtol=1e-6, atol=1e-6),
+             dict(t_end=0.2, dt=0.04, rtol=1e-6, atol=1e-6), dict(t_end=0.2, dt=0.05, integrator="rk4", substeps=4),
+             dict(t_end=0.2, dt=0.05, integrator="rk4", substeps=9)]
+    runs = [nc.simulate(model, q0=q0, v0=v0, method="joint", **c) for c in cases]
+    assert len(kept) == len(cases) - 1                  # the repeated case reused its prepared run
+    monkeypatch.setattr(js_module, "prepared_run", js_module.PreparedRun)
+    for c, run in zip(cases, runs):
+        ref = nc.simulate(model, q0=q0, v0=v0, method="joint", **c)
+        np.testing.assert_array_equal(run.qj, ref.qj)
+        np.testing.assert_array_equal(run.t, ref.t)
+        np.testing.assert_allclose(run.t, np.arange(len(run.t)) * c["dt"], rtol=0, atol=1e-15)
+        assert run.t[-1] == c["t_end"]
+        drop = ("build_time", "wall_time")
+        assert {k: v for k, v in run.info.items() if k not in drop} == \
+            {k: v for k, v in ref.info.items() if k not in drop}
+        assert list(run.info) == list(ref.info)
+        if "rtol" in c:
+            assert (run.info["rtol"], run.info["atol"]) == (c["rtol"], c["atol"])
+        else:
+            assert run.info["substeps"] == c["substeps"] and run.info["h"] == pytest.approx(c["dt"] / c["substeps"])
+    monkeypatch.undo()
+    monkeypatch.setenv("CC", "no-such-compiler-ncgen")
+    compiler._find.cache_clear()
+    without = nc.simulate(model, q0=q0, v0=v0, method="joint", **cases[0])
+    assert without.info["kernels_reason"] == "no C compiler"
+    np.testing.assert_array_equal(without.qj, runs[0].qj)
+    monkeypatch.delenv("CC")
+    assert nc.simulate(model, q0=q0, v0=v0, method="joint", **cases[0]).info["kernels_reason"] == \
+        runs[0].info["kernels_reason"] != "no C compiler"
+
+
+def test_the_joint_states_are_copies_made_when_read_and_editing_them_changes_nothing_else(chain):
+    """``traj.qj``/``traj.vj`` of a joint run are made when first read, as copies: edited
+    before the natural coordinates are derived, those still equal ``from_joint_space`` of the
+    run's joint states (a second run's), and a pickle keeps the edit."""
+    model, q0, v0 = chain
+    run = lambda: nc.simulate(model, 0.2, 0.05, q0=q0, v0=v0, method="joint", rtol=1e-8, atol=1e-10)  # noqa: E731
+    edited, reference = run(), run()
+    assert callable(edited._arrays["qj"])                   # not made yet
+    edited.qj[:] += 1.0
+    edited.vj[:] -= 2.0
+    np.testing.assert_array_equal(edited.qj, reference.qj + 1.0)
+    np.testing.assert_array_equal(edited.q, reference.q)
+    np.testing.assert_array_equal(edited.v, reference.v)
+    q, v = model.from_joint_space(reference.qj[-1], reference.vj[-1])
+    np.testing.assert_allclose(edited.q[-1], q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(edited.v[-1], v, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(edited)).vj, reference.vj - 2.0)

@@ -6,13 +6,13 @@ choice that does not exist is an error, never silently replaced by another compi
 """
 from __future__ import annotations
 
-import os
 import shlex
 import shutil
 import subprocess
 from dataclasses import dataclass
 from functools import lru_cache
 
+from ncgen.environment import decoded, getenv_key
 from ncgen.errors import CompilerNotFound
 
 CANDIDATES = ("cc", "gcc", "clang")
@@ -29,11 +29,16 @@ class Compiler:
 def find_compiler(cc: str | None = None) -> Compiler:
     """The compiler to use (see module docstring); raises :class:`CompilerNotFound`.  Found
     once per ``cc``, ``$CC`` and ``$PATH`` (a run's kernel choice asks on every call)."""
-    return _find(cc, os.environ.get("CC"), os.environ.get("PATH"))
+    return _find(cc, getenv_key("CC"), getenv_key("PATH"))
 
 
 @lru_cache(maxsize=16)
-def _find(cc: str | None, env_cc: str | None, path: str | None) -> Compiler:
+def _find(cc: str | None, env_cc, path) -> Compiler:
+    """The compiler of ``cc``, else of ``$CC`` (``env_cc``), else the first of
+    :data:`CANDIDATES` on ``$PATH`` (``path``); both variables as
+    :func:`~ncgen.environment.getenv_key` gives them, or None."""
+    env_cc = None if env_cc is None else decoded(env_cc)
+    path = None if path is None else decoded(path)
     explicit = cc if cc is not None else env_cc
     if explicit:
         argv = shlex.split(explicit)

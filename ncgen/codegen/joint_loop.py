@@ -82,8 +82,12 @@ def run_options(options: JointOptions, stop_at_outputs: bool) -> JointOptions:
     ``stop_at_outputs``, with its own stop flag, cleared (runs never share one)."""
     copy = JointOptions.from_buffer_copy(options)
     copy.stop_at_outputs = int(bool(stop_at_outputs))
-    copy.stop = ctypes.pointer(ctypes.c_int(0))
+    copy.stop = _STOP_FLAG(ctypes.c_int(0))
     return copy
+
+
+#: The stop flag's pointer type (``ctypes.pointer`` looks it up on every call).
+_STOP_FLAG = ctypes.POINTER(ctypes.c_int)
 
 
 def integrator_name(options: JointOptions) -> str:

@@ -13,6 +13,8 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
+from ncgen.model.data import model_data
+
 
 class BufferedFunction:
     """``f`` (dense column-vector or scalar inputs) evaluated into NumPy arrays:
@@ -68,8 +70,6 @@ class BufferedFunction:
 def buffered(model, key: str, make: Callable[[], ca.Function] | None = None) -> BufferedFunction:
     """The :class:`BufferedFunction` of ``model.functions[key]`` (or of the function ``make()``
     builds, kept under ``key``), built once per model (``model.data``)."""
-    from ncgen.model.data import model_data
-
     slot = model_data(model).buffered
     hit = slot.get(key)
     if hit is None:

@@ -87,6 +87,13 @@ class ModelData:
     #: ``{(controller id, joint_dynamics, cflags): (controller, JointLoop)}``: the compiled
     #: joint-space simulation loops (:func:`ncgen.runtime.joint_simulation.joint_loop`).
     joint_loops: dict = field(default_factory=dict)
+    #: ``{key: PreparedRun}``: what a joint-space run derives from its options, output count,
+    #: controller and compiler but not from its start (the loop, its kernel choice, the info
+    #: template; :func:`ncgen.runtime.joint_simulation.prepared_run`), up to
+    #: :data:`~ncgen.runtime.joint_simulation.KEPT_RUNS`.
+    prepared_runs: dict = field(default_factory=dict)
+    #: The lists of names of the model's trajectories (:func:`ncgen.runtime.trajectory.output_names`).
+    output_names: dict | None = None
     #: The model's constraints and accelerations with its nonholonomic elements
     #: (:func:`ncgen.assembly.nonholonomic.rolling_system`), or None.
     rolling_system: object = None

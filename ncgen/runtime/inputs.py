@@ -19,6 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ncgen.environment import getenv
 from ncgen.errors import NcgenError, ShapeError
 from ncgen.validation import allocation, as_numbers, as_scalar, as_vector
 
@@ -29,10 +30,16 @@ def time_grid(t0: float, t_end: float, dt: float, bytes_per_point: float = 8.0) 
     """``t0, t0 + h, ..., t_end`` (see module docstring).  Each argument is checked on its own
     and named; a grid whose results would need more than
     :data:`~ncgen.validation.MAX_ALLOCATION` bytes (``bytes_per_point`` each) is refused
-    before anything is allocated."""
-    t0 = as_scalar(t0, "t0")
-    t_end = as_scalar(t_end, "t_end")
-    dt = as_scalar(dt, "dt")
+    before anything is allocated.  A fresh array each call."""
+    return _checked_grid(as_scalar(t0, "t0"), as_scalar(t_end, "t_end"), as_scalar(dt, "dt"), float(bytes_per_point),
+                         getenv("NCGEN_MAX_BYTES")).copy()
+
+
+@lru_cache(maxsize=64)
+def _checked_grid(t0: float, t_end: float, dt: float, bytes_per_point: float, limit: str | None) -> np.ndarray:
+    """The grid of :func:`time_grid`, checked and computed once per arguments and allocation
+    limit ``limit`` (``$NCGEN_MAX_BYTES``, which :func:`~ncgen.validation.allocation` reads);
+    a refused grid is refused again every call (nothing kept)."""
     if dt <= 0:
         raise NcgenError(f"dt: expected a positive output step (s), got {dt:g}")
     if not t_end > t0:
@@ -44,12 +51,6 @@ def time_grid(t0: float, t_end: float, dt: float, bytes_per_point: float = 8.0) 
     allocation((n + 1) * bytes_per_point, lambda: f"the output grid t0 = {t0:g} ... t_end = {t_end:g} s with "
                f"dt = {dt:g} s ({n + 1:,} points)", "use a larger dt (the output step; the integrator "
                "chooses its own internal steps) or a shorter run")
-    return _grid(t0, t_end, n).copy()
-
-
-@lru_cache(maxsize=64)
-def _grid(t0: float, t_end: float, n: int) -> np.ndarray:
-    """``t0, ..., t_end`` in ``n`` equal steps, computed once per ``(t0, t_end, n)`` (callers copy it)."""
     return t0 + (t_end - t0) * np.arange(n + 1) / n
 
 

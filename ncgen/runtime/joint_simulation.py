@@ -36,6 +36,7 @@ from ncgen.codegen.tree_check import PIVOT_TOL
 from ncgen.codegen.tree_kernels import JOINT_KINDS
 from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
 from ncgen.codegen.joint_loop import INTERRUPTED, JointOptions, integrator_name, joint_options, run_options
+from ncgen.environment import getenv_key
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.runtime.integrator import Run
@@ -295,7 +296,9 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
         raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
                          "interval (zoh); use hold='zoh'")
     js = model.joint_space
-    loop, choice, build_time = _run_loop(model, controller, opts, len(t) - 1)
+    build_start = time.perf_counter()
+    prepared = prepared_run(model, controller, opts, options, len(t) - 1)
+    loop, build_time = prepared.loop, time.perf_counter() - build_start
     n, nqj = len(t), js.nq
     X = np.zeros((n, nqj + js.nv))
     X[0, :nqj], X[0, nqj:] = run.joint_state or js.state(model, run.q, run.v)  # consistent: start_state made it so
@@ -303,17 +306,18 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and model.nu else None
     varying = model.nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
     options = run_options(options, varying)
-    integrator = integrator_name(options)
+    integrator = prepared.integrator
     start = time.perf_counter()
     status, k, failed, stats = _integrate(model, loop, options, run, X, W, S, opts.progress)
-    steps = {"rtol": options.rtol, "atol": options.atol} if integrator == "dopri5" else \
-        {"h": float(t[1] - t[0]) / options.substeps, "substeps": options.substeps}
-    info = {"method": "joint", "integrator": integrator, **steps, "hold": hold,
-            "controller": None if controller is None else controller.describe(),
-            "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(opts.joint_dynamics),
-            "kernels": loop.kernels, "kernels_reason": choice.reason,
-            "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
-            "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
+    info = dict(prepared.info)
+    if integrator == "rk4":
+        info["h"] = float(t[1] - t[0]) / options.substeps
+    if controller is not None:
+        info["controller"] = controller.describe()
+    if feedback is not None:
+        info["feedback"] = feedback[0]
+    info["stats"] = {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])}
+    info["build_time"], info["wall_time"], info["complete"] = build_time, time.perf_counter() - start, status == 0
     trusted, why = k + 1, ""
     if integrator == "rk4" and (failed is not None or status not in (0, INTERRUPTED)):
         trusted, why = _trusted_rk4_rows(model, loop, t[:k + 1], X[:k + 1], W, S, p, options)
@@ -353,13 +357,64 @@ def _controller_cause(model, loop: JointLoop, times: tuple, x: np.ndarray, p) ->
     return None
 
 
-def _run_loop(model, controller, opts: JointLoopOptions, n_out: int):
-    """``(loop, choice, build time in s)``: the joint loop of a run of ``n_out`` output
-    intervals on the kernels :func:`choose_kernels` chooses (found, or built now)."""
-    build_start = time.perf_counter()
-    choice = choose_kernels(model, n_out, controller, opts.joint_dynamics, opts.kernels)
-    loop = joint_loop(model, controller, opts.joint_dynamics, kernels=choice.backend)
-    return loop, choice, time.perf_counter() - build_start
+#: Prepared runs kept per model (:func:`prepared_run`; then forgotten all at once).
+KEPT_RUNS = 16
+
+
+class PreparedRun:
+    """What a joint-space run derives from its options, output count, controller and
+    compiler but not from its start: the loop (:func:`joint_loop`) on the kernels
+    :func:`choose_kernels` chose, the integrator's name and the run's ``info`` without its
+    per-run entries (the RK4 step ``h``, the controller's and feedback's descriptions, the
+    counts and times: set by the run)."""
+
+    __slots__ = ("controller", "opts", "options", "loop", "integrator", "info")
+
+    def __init__(self, model, controller, opts: JointLoopOptions, options: JointOptions, n_out: int):
+        choice = choose_kernels(model, n_out, controller, opts.joint_dynamics, opts.kernels)
+        self.controller, self.opts, self.options = controller, opts, options
+        self.loop = joint_loop(model, controller, opts.joint_dynamics, kernels=choice.backend)
+        self.integrator = integrator = integrator_name(options)
+        steps = {"rtol": options.rtol, "atol": options.atol} if integrator == "dopri5" else \
+            {"h": None, "substeps": options.substeps}
+        self.info = {"method": "joint", "integrator": integrator, **steps, "hold": opts.hold,
+                     "controller": None, "feedback": None,
+                     "joint_dynamics": bool(opts.joint_dynamics), "kernels": self.loop.kernels,
+                     "kernels_reason": choice.reason, "stats": None, "build_time": None, "wall_time": None,
+                     "complete": None}
+
+
+def prepared_run(model, controller, opts: JointLoopOptions, options: JointOptions, n_out: int) -> PreparedRun:
+    """The :class:`PreparedRun` of a run of ``n_out`` output intervals, made once per
+    options, output count, controller and C compiler (``$CC``, ``$PATH``) as long as the
+    kernel choice cannot change: once the loop chosen, and for ``kernels="auto"`` without a
+    controller every loop the choice weighs, is loaded (else made on every call, as
+    :func:`choose_kernels` weighs what is compiled)."""
+    data = model_data(model)
+    key = (id(opts), id(options), n_out, id(controller), getenv_key("CC"), getenv_key("PATH"),
+           *_loaded(data.joint_loops))
+    hit = data.prepared_runs.get(key)
+    if hit is not None and hit.controller is controller and hit.opts is opts and hit.options is options:
+        return hit
+    prepared = PreparedRun(model, controller, opts, options, n_out)
+    if _choice_settled(model, controller, opts, data.joint_loops):
+        if len(data.prepared_runs) >= KEPT_RUNS:
+            data.prepared_runs.clear()
+        data.prepared_runs[key[:-2] + _loaded(data.joint_loops)] = prepared    # (as loaded now)
+    return prepared
+
+
+def _loaded(loops: dict) -> tuple[bool, bool]:
+    """Whether the model's own loop (no controller) and the tables' loop are loaded."""
+    return (id(None), False, None) in loops, loops.get("tables") is not None
+
+
+def _choice_settled(model, controller, opts: JointLoopOptions, loops: dict) -> bool:
+    """Whether :func:`choose_kernels` gives the same for the same arguments, compiler and
+    loaded loops: it weighs no tree-library units still to compile (:func:`_missing_units`)."""
+    return (opts.kernels != "auto" or controller is not None or bool(opts.joint_dynamics) or bool(model.np)
+            or (id(None), False, None) in loops or loops.get("tables") is not None
+            or model_data(model).table_kinds == (None,))
 
 
 def _input_slopes(U: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -458,7 +513,7 @@ def _feedback(model, feedback, t: float, x: np.ndarray, p) -> np.ndarray:
 def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring); ``X``
     and ``W`` are the run's own arrays, which the lazy outputs keep (``traj.qj``, ``traj.vj``
-    are copies: editing them changes nothing else)."""
+    too: copies made when first read, so editing them changes nothing else)."""
     js = model.joint_space
     n = len(t)
     W = W[:n]
@@ -471,5 +526,5 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
         lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,
                                                  P())[1]).T.reshape(n, model.nc),
         applied, p, info)
-    traj.qj, traj.vj = X[:, :js.nq].copy(), X[:, js.nq:].copy()
+    traj.qj, traj.vj = (lambda: X[:, :js.nq].copy()), (lambda: X[:, js.nq:].copy())
     return traj

@@ -33,6 +33,7 @@ import numpy as np
 
 from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
+from ncgen.model.data import model_data
 from ncgen.runtime import contact_outputs, outputs
 
 NAME_KEYS = ("coordinate_names", "constraint_names", "input_names", "parameter_names",
@@ -49,7 +50,15 @@ OPTIONAL_ARRAY_KEYS = JOINT_ARRAY_KEYS + contact_outputs.KEYS
 
 def output_names(model) -> dict:
     """The lists of names of a trajectory of ``model``: :data:`NAME_KEYS`, the joint names and,
-    for a model with contacts, the contact names."""
+    for a model with contacts, the contact names; made once per model (read only: a
+    trajectory copies a list when it is read)."""
+    data = model_data(model)
+    if data.output_names is None:
+        data.output_names = _output_names(model)
+    return data.output_names
+
+
+def _output_names(model) -> dict:
     js = model.joint_space
     names = {key: getattr(model, key) for key in NAME_KEYS}
     names.update(joint_names=js.joint_names, joint_position_names=js.position_names, joint_rate_names=js.rate_names)
