@@ -284,6 +284,20 @@ def _joint_ode(model, controller, joint_dynamics: bool):
     return joint_ode_function(model, dynamics, inverse, controller=controller, joint_dynamics=joint_dynamics)
 
 
+def _run_info(prepared, run: Run, options: JointOptions, stats) -> dict:
+    """The run's ``info``: the prepared run's template, then this run's RK4 step ``h`` (s), controller,
+    feedback kind and the integrator's counts ``stats``."""
+    info = dict(prepared.info)
+    if prepared.integrator == "rk4":
+        info["h"] = float(run.t[1] - run.t[0]) / options.substeps
+    if run.controller is not None:
+        info["controller"] = run.controller.describe()
+    if run.feedback is not None:
+        info["feedback"] = run.feedback[0]
+    info["stats"] = {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])}
+    return info
+
+
 def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOptions) -> Trajectory:
     """Integrate in joint space on the grid ``run.t`` from the natural state ``(run.q,
     run.v)`` (module docstring) with the group ``opts`` and the loop's options ``options``
@@ -309,14 +323,7 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     integrator = prepared.integrator
     start = time.perf_counter()
     status, k, failed, stats = _integrate(model, loop, options, run, X, W, S, opts.progress)
-    info = dict(prepared.info)
-    if integrator == "rk4":
-        info["h"] = float(t[1] - t[0]) / options.substeps
-    if controller is not None:
-        info["controller"] = controller.describe()
-    if feedback is not None:
-        info["feedback"] = feedback[0]
-    info["stats"] = {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])}
+    info = _run_info(prepared, run, options, stats)
     info["build_time"], info["wall_time"], info["complete"] = build_time, time.perf_counter() - start, status == 0
     trusted, why = k + 1, ""
     if integrator == "rk4" and (failed is not None or status not in (0, INTERRUPTED)):
