@@ -508,6 +508,39 @@ def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     assert compiled[3:] == ["derivatives", "edge_spherical", "body"]
 
 
+
+def test_a_unit_loaded_under_other_flags_is_never_reused(monkeypatch):
+    """The tree library's loaded units, the bound tables and their algorithms are kept per
+    process by the flags of the units (``cflags`` and ``$NCGEN_CFLAGS``): under other flags
+    ``table_algorithm`` binds the tables again to a library of its own, which loads the unit
+    compiled with those flags (recorded here, not compiled), and the earlier ones are found
+    again under their own flags."""
+    import ncgen.runtime.tree_library as tl
+
+    model = small_tree(f"flags_tree_{os.getpid()}")
+    k = tl.table_algorithm(model, "aba")
+    assert tl.table_algorithm(model, "aba") is k and k.tree.library is tl.load_tree_library()
+    flags = os.environ.get("NCGEN_CFLAGS")
+    loads = []
+
+    class Loaded(Exception):
+        pass
+
+    def unit_library(unit, cflags=None):
+        loads.append((unit, cflags, os.environ["NCGEN_CFLAGS"]))         # what cached_library compiles with
+        raise Loaded
+
+    monkeypatch.setattr(tl, "unit_library", unit_library)
+    monkeypatch.setenv("NCGEN_CFLAGS", f"{flags or ''} -DNCGEN_OTHER_FLAGS")
+    assert tl.load_tree_library() is not k.tree.library
+    assert tl.bound_tree(model) is not k.tree and tl.bound_tree(model).library is tl.load_tree_library()
+    with pytest.raises(Loaded):
+        tl.table_algorithm(model, "aba")
+    assert loads == [("forward", None, f"{flags or ''} -DNCGEN_OTHER_FLAGS")]
+    monkeypatch.undo()
+    assert tl.table_algorithm(model, "aba") is k and tl.load_tree_library() is k.tree.library
+
+
 #: Bodies of mass 1 sliding freely along z on the ground (a = τ − g each) beside a small mimic tree:
 #: with them it has more than 12 rates (NCGEN_TREE_DENSE_NV of ncgen_tree_tables.h, up to which
 #: forward dynamics is a Cholesky of M_i), so its forward dynamics runs the articulated-body algorithm.

@@ -254,8 +254,10 @@ def _choice(model, name: str, kernels: str) -> tuple[str, str]:
 def kernel_of(model, name: str, kernels: str):
     """The kernel of :func:`algorithm_kernels`' choice: a :class:`AlgorithmKernel` or a
     :class:`~ncgen.runtime.tree_library.TableAlgorithm`."""
+    from ncgen.runtime.tree_library import table_algorithm
+
     if algorithm_kernels(model, name, kernels) == "tables":
-        return model_data(model).table_algorithms[name]
+        return table_algorithm(model, name)
     return algorithm_kernel(model, name)
 
 
@@ -268,8 +270,10 @@ class Door:
     in C.  Whatever it refuses, other times or parameters, and
     rows of states take the checked path (:func:`call`, :func:`batch`), whose error names the
     argument.  ``flags``: the ``$NCGEN_CFLAGS`` it was bound under (None: ncgen's defaults).
-    ``free``: the door caller itself where any time goes to it (the tables' algorithms, which
-    depend on no time; else None), for callers that skip this object's frame (:func:`rnea`)."""
+    ``free``: the door caller itself where any time and the default parameters go to it (the
+    tables' algorithms, and flat kernels whose outputs depend on neither ``t`` nor ``p``: the
+    ABA of a model without time-dependent forces or parameters; else None), for callers that
+    skip this object's frame (:func:`rnea`, :func:`aba`)."""
 
     __slots__ = ("model", "kernel", "fast", "tables", "flags", "free")
 
@@ -278,7 +282,7 @@ class Door:
         k = self.kernel = kernel_of(model, name, kernels)
         self.model, self.tables = model, not isinstance(k, AlgorithmKernel)
         self.fast = k.door_caller(quaternion_offsets(model.joint_space))
-        self.free = self.fast if self.tables else None
+        self.free = self.fast if self.tables or not _depends_on_time_or_parameters(k) else None
 
     def __call__(self, args: tuple, p, t: float, out):
         k, fast = self.kernel, self.fast
@@ -298,6 +302,13 @@ class Door:
         model, k = self.model, self.kernel
         result = batch(model, k, args, p, t, self.fast) if np.ndim(args[0]) == 2 else call(model, k, args, p, t)
         return result if out is None else write_out(out, result, k.name)
+
+
+def _depends_on_time_or_parameters(k: AlgorithmKernel) -> bool:
+    """Whether an output of the flat kernel ``k`` depends on its time or parameter input (CasADi's
+    structural dependency: true also for a term that happens to vanish)."""
+    f = k.direct.function
+    return any(any(f.which_depends(f.name_in(i), f.name_out(), 1, True)) for i in (0, f.n_in() - 1))
 
 
 def door(model, name: str, kernels: str = "auto") -> Door:
@@ -467,7 +478,8 @@ def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto", ou
 
 def through(d: Door, x, y, z, p, t: float, out):
     """``d((x, y, z), p, t, out)``, straight to its C caller when it takes any time (``Door.free``)
-    and ``p`` is None; whatever that refuses takes the door (whose checked path names it)."""
+    and ``p`` is None; whatever that refuses, and a singular or non-finite result, takes the door
+    (whose checked path names the argument, or raises the kernel's :class:`ModelError`)."""
     free = d.free
     if free is not None and p is None:
         try:
@@ -486,7 +498,7 @@ def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) 
 
 def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``aj``: joint accelerations under the efforts ``tau`` of the independent rates (Pinocchio's ``aba``)."""
-    return door(model, "aba", kernels)((qj, vj, tau,), p, t, out)
+    return through(door(model, "aba", kernels), qj, vj, tau, p, t, out)
 
 
 def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto",

@@ -295,14 +295,23 @@ class TreeLibrary:
             return True
 
 
-_LOADED: dict[str | None, TreeLibrary] = {}
+#: The loaded tree libraries of this process by :func:`library_key`.
+_LOADED: dict[tuple[str | None, str | None], TreeLibrary] = {}
+
+
+def library_key(cflags: str | None = None) -> tuple[str | None, str | None]:
+    """``(cflags, $NCGEN_CFLAGS)``: what the units a :class:`TreeLibrary` loads are compiled with
+    (:func:`unit_cflags`), so that a unit built under other flags is never reused."""
+    return cflags, os.environ.get("NCGEN_CFLAGS")
 
 
 def load_tree_library(cflags: str | None = None) -> TreeLibrary:
-    """The tree library of this process (its units compiled and loaded as trees need them)."""
-    if cflags not in _LOADED:
-        _LOADED[cflags] = TreeLibrary(cflags)
-    return _LOADED[cflags]
+    """The tree library of this process for ``cflags`` and the environment's ``$NCGEN_CFLAGS``
+    (its units compiled and loaded as trees need them)."""
+    key = library_key(cflags)
+    if key not in _LOADED:
+        _LOADED[key] = TreeLibrary(cflags)
+    return _LOADED[key]
 
 
 class BoundTree:
@@ -532,23 +541,23 @@ def table_algorithm(model, name: str) -> TableAlgorithm:
     :class:`~ncgen.errors.CompilerNotFound` with no compiler and no library in the cache)."""
     from ncgen.model.data import model_data
 
-    data = model_data(model)
-    k = data.table_algorithms.get(name)
+    data, key = model_data(model), (name, library_key())
+    k = data.table_algorithms.get(key)
     if k is None:
-        k = data.table_algorithms[name] = TableAlgorithm(bound_tree(model), name)
+        k = data.table_algorithms[key] = TableAlgorithm(bound_tree(model), name)
     return k
 
 
 def bound_tree(model) -> BoundTree:
-    """``model``'s tree tables bound once per model (raises
+    """``model``'s tree tables bound once per model and :func:`library_key` (raises
     :class:`~ncgen.codegen.tree_tables.UnsupportedTree`)."""
     from ncgen.codegen.tree_tables import tree_tables
     from ncgen.model.data import model_data
 
-    data = model_data(model)
-    tree = data.table_algorithms.get(None)
+    data, key = model_data(model), (None, library_key())
+    tree = data.table_algorithms.get(key)
     if tree is None:
-        tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
+        tree = data.table_algorithms[key] = BoundTree(tree_tables(model))
     return tree
 
 
