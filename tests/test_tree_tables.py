@@ -541,6 +541,41 @@ def test_a_unit_loaded_under_other_flags_is_never_reused(monkeypatch):
     assert tl.table_algorithm(model, "aba") is k and tl.load_tree_library() is k.tree.library
 
 
+
+def test_a_library_built_at_given_flags_is_found_under_those_flags_only(tmp_path, monkeypatch):
+    """The compile cache's index of a shared library (the tree library's units, the element
+    library) names the flags it was built with, given (``UNIT_CFLAGS``) or ``$NCGEN_CFLAGS``: a
+    library built at -O1 is not taken for -O3 or ncgen's defaults, nor the reverse; the same flags
+    from the environment find it (compiles recorded here, not run)."""
+    from types import SimpleNamespace
+
+    import ncgen.codegen.compile_cache as cc
+    import ncgen.runtime.table_library as tab
+
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("NCGEN_CFLAGS", raising=False)
+    built = []
+
+    def compile_package(out, cflags=None, env_flags=True):
+        built.append(cflags)
+        library = tmp_path / f"probe_{len(built)}.so"
+        library.write_text(str(cflags))
+        return SimpleNamespace(path=library, compiler=SimpleNamespace(version="cc 12"))
+
+    monkeypatch.setattr(cc, "compile_package", compile_package)
+    monkeypatch.setattr(tab, "entry_problem", lambda d, library: None if library.exists() else "missing")
+    monkeypatch.setattr(tab, "installed_library", lambda *a: None)
+    source = "s" * 64
+    paths = {flags: tab.cached_library("probe", source, lambda out: out, "probe", flags)[0]
+             for flags in ("-O1", "-O3", None)}
+    assert built == ["-O1", "-O3", None] and len(set(paths.values())) == 3
+    assert tab.cached_library("probe", source, lambda out: out, "probe", "-O3") == (paths["-O3"], False)
+    assert tab.library_ready("probe", source, "-O1") and not tab.library_ready("probe", source, "-O2")
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O1")
+    assert tab.cached_library("probe", source, lambda out: out, "probe") == (paths["-O1"], False)
+    assert not tab.library_ready("probe", source, "-O2") and len(built) == 3
+
+
 #: Bodies of mass 1 sliding freely along z on the ground (a = τ − g each) beside a small mimic tree:
 #: with them it has more than 12 rates (NCGEN_TREE_DENSE_NV of ncgen_tree_tables.h, up to which
 #: forward dynamics is a Cholesky of M_i), so its forward dynamics runs the articulated-body algorithm.
