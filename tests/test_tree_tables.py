@@ -317,13 +317,15 @@ def test_joint_simulation_tables_equal_flat(tree, library):
 
 def test_auto_uses_the_tables_for_a_covered_tree_only_without_a_compiler(tree, library, monkeypatch):
     """``kernels="auto"`` keeps the faster flat kernels where a compiler can build them and
-    takes the tables where none can."""
+    takes the tables where none can (the CRBA; this tree's ABA, of more than 12 rates, is the
+    tables' anyway)."""
     from ncgen.model.data import model_data
 
-    assert rta.algorithm_kernels(tree, "aba") == "flat"
+    assert rta.algorithm_kernels(tree, "crba") == "flat"
+    assert rta.algorithm_kernels(tree, "aba") == "tables" and tree.joint_space.nv > rta.TABLES_ABA_RATES
     monkeypatch.setattr(rta, "compiler_present", lambda cc=None: False)
-    monkeypatch.delitem(model_data(tree).algorithm_kernels, ("aba", None), raising=False)
-    assert rta.algorithm_kernels(tree, "aba") == "tables"
+    monkeypatch.delitem(model_data(tree).algorithm_kernels, ("crba", None), raising=False)
+    assert rta.algorithm_kernels(tree, "crba") == "tables"
 
 
 URDF = """<robot name="{name}">
@@ -663,6 +665,32 @@ def small_tree(name: str):
     s.add_joint(nc.Revolute(s.ground, b1, at=(0.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0), name="hinge"))
     s.add_joint(nc.Prismatic(b1, b2, at=(0.8, 0.0, 0.0), axis=(1.0, 0.0, 0.0), name="slide"))
     return s.build()
+
+
+def test_auto_runs_the_aba_of_a_tree_of_more_than_12_rates_on_the_tables():
+    """``kernels="auto"`` takes the tables' articulated-body loops for the ABA of a tree of
+    more than :data:`~ncgen.runtime.tree_algorithm_kernels.TABLES_ABA_RATES` rates (a hinge and
+    a slider beside 11 free sliders: 13) and the flat kernel up to them; its accelerations
+    equal the flat kernel's (1e-12) and, for the free sliders of mass 1, the closed form
+    a = τ − g; the call goes straight to the tables' C caller."""
+    s = nc.System(f"auto_aba_tree_{os.getpid()}", gravity=(0.0, 0.0, -G))
+    b1 = s.add_body("b1", mass=1.3, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.4, 0.0, 0.1))
+    b2 = s.add_body("b2", mass=0.8, inertia=np.diag([0.05, 0.06, 0.07]), position=(0.9, 0.1, 0.0))
+    s.add_joint(nc.Revolute(s.ground, b1, at=(0.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0), name="hinge"))
+    s.add_joint(nc.Prismatic(b1, b2, at=(0.8, 0.0, 0.0), axis=(1.0, 0.0, 0.0), name="slide"))
+    add_free_sliders(s)
+    model = s.build()
+    assert model.joint_space.nv == rta.TABLES_ABA_RATES + 1
+    assert rta.algorithm_kernels(model, "aba") == "tables" and "measures faster" in rta.kernels_reason(model, "aba")
+    assert rta.algorithm_kernels(model, "crba") == "flat"
+    assert rta.algorithm_kernels(small_tree(f"auto_aba_small_{os.getpid()}"), "aba") == "flat"
+    rng = np.random.default_rng(13)
+    qj, vj, tau = (rng.uniform(-1, 1, model.joint_space.nv) for _ in range(3))
+    a = nc.aba(model, qj, vj, tau)
+    assert rta.door(model, "aba").tables and rta.door(model, "aba").free is not None
+    np.testing.assert_allclose(a, nc.aba(model, qj, vj, tau, kernels="flat"), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a[2:], tau[2:] - G, rtol=0, atol=1e-12)
+
 
 
 def test_rate_kernels_only_where_the_position_rates_are_not_the_rates():

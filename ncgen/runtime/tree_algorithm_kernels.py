@@ -20,7 +20,8 @@ compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` �
 own SX functions compiled per model, ``"auto"`` (default) — the tables for RNEA wherever they
 cover a model without parameters (:data:`TABLES_FIRST`: one call or a batch, they cost
 0.55–0.9× the flat RNEA on the Panda, xArm7, Solo12 and Talos, about as much, 0.8–1.2×, on
-the UR5 and UR10), for the other
+the UR5 and UR10), and for the ABA of trees of more than :data:`TABLES_ABA_RATES` rates
+(Talos: about 0.7× the flat ABA from Python), for the other
 algorithms flat wherever a C compiler is present or the flat kernel is already built in this
 process with optimisation (never one compiled at -O0 for another ``$NCGEN_CFLAGS``; the tables cost 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA:
 :mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py), else the tables when they
@@ -208,6 +209,24 @@ KERNELS = ("auto", "tables", "flat")
 #: ones: benchmarks/call_overhead.py ``--kernels``).
 TABLES_FIRST = frozenset({"rnea"})
 
+#: Trees of more independent rates than this (the tables' dense-Cholesky limit,
+#: ``NCGEN_TREE_DENSE_NV``) run ``aba`` on the tables' articulated-body loops under
+#: ``kernels="auto"``: the flat ABA of a large tree is long straight-line code (Talos: 25 k CasADi
+#: instructions, compiled at -O1 in 9–36 s of gcc) that the caches of a shared machine do not
+#: hold; from Python Talos's tables' ABA took 0.53–0.58 / 0.62–0.65 (min / median) of
+#: ``pinocchio.aba``'s time against the flat kernel's 0.75–0.81 / 0.88–1.06, while on the xArm7
+#: (0.78 / 0.81 against 0.80 / 0.85) and the UR10 (0.69 / 0.76 against 0.59 / 0.62) the flat ABA
+#: holds (AMD EPYC, load 6–8, 9 interleaved rounds).
+TABLES_ABA_RATES = 12
+
+
+def _tables_first(model, name: str) -> bool:
+    """Whether ``kernels="auto"`` tries the tables first for the algorithm ``name`` of ``model``
+    (:data:`TABLES_FIRST`, :data:`TABLES_ABA_RATES`; models without parameters)."""
+    if model.np:
+        return False
+    return name in TABLES_FIRST or (name == "aba" and len(rnea_applies(model) or ()) > TABLES_ABA_RATES)
+
 
 def algorithm_kernels(model, name: str, kernels: str = "auto") -> str:
     """``"tables"`` or ``"flat"``: the kernels the algorithm ``name`` of ``model`` uses for the
@@ -233,7 +252,7 @@ def _choice(model, name: str, kernels: str) -> tuple[str, str]:
         if kernels == "tables":
             table_algorithm(model, name)
         return kernels, "chosen (kernels=)"
-    if name in TABLES_FIRST and not model.np:
+    if _tables_first(model, name):
         try:
             table_algorithm(model, name)
             return "tables", f"the tables' {name} measures faster than the flat kernel"
