@@ -17,6 +17,7 @@ import pytest
 
 import ncgen as nc
 from ncgen.errors import NcgenError
+from ncgen.runtime.tree_algorithm_kernels import door
 from test_reliability_arrays import bad_values
 
 M, L, G, IYY, K0 = 2.0, 0.5, 9.81, 0.03, 3.0
@@ -53,6 +54,7 @@ def test_time_and_parameters_reach_the_kernel_whatever_set_them_last(hinge):
         want_a = (tau + M * G * L * np.cos(th) - L * np.cos(th) * (k + np.sin(t))) / (IYY + M * L**2)
         assert nc.aba(hinge, [th], [v], [tau], t=t, p=p) == pytest.approx([want_a], abs=1e-12)
         assert nc.joint_forward_dynamics(hinge, [th], [v], [tau], t=t, p=p) == pytest.approx([want_a], abs=1e-12)
+    assert door(hinge, "aba").free is None                   # its ABA depends on t and p: never straight to C
     kernel = nc.algorithm_kernel(hinge, "rnea")              # the kernel's own set() changes what it uses,
     kernel.set(t=2.0, p=[7.0])                               # and the functions put back their own
     assert kernel([th], [v], [a]) == pytest.approx([closed_form(th, a, 2.0, 7.0)], abs=1e-12)

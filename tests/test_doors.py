@@ -258,8 +258,11 @@ def test_a_good_call_takes_the_c_door_only(tree, monkeypatch):
         CALLS[name](tree, x)
         CALLS[name](tree, [list(v) for v in x])                                  # lists of floats too
     with pytest.raises(AssertionError, match="checked path"):
-        nc.aba(tree, x[0], x[1], x[3], t=1.0)                                    # a new time: the checked path
+        nc.crba(tree, x[0], t=1.0)                                               # a new time: the checked path
+    with pytest.raises(AssertionError, match="checked path"):
+        nc.aba(tree, x[0], x[1], x[3], p=tree.p0)                                # parameters given: the checked path
     nc.rnea(tree, *x[:3], t=1.0)                        # the tables' RNEA depends on no time: the C door still
+    nc.aba(tree, x[0], x[1], x[3], t=1.0)               # nor does this tree's ABA
 
 
 def _recorded_flags(kernel) -> list[str]:
@@ -306,3 +309,54 @@ def test_the_tables_rnea_goes_straight_to_its_c_caller(tree, monkeypatch):
     with pytest.raises(ShapeError, match="vj"):
         nc.rnea(tree, x[0], x[1][:-1], x[2])
     assert entered == [1]
+
+
+def test_the_flat_aba_goes_straight_to_its_c_caller(tree, monkeypatch):
+    """``nc.aba`` on a flat kernel whose outputs depend on neither the time nor the parameters
+    (a tree without time-dependent forces or parameters) calls the door's C caller without the
+    :class:`Door` frame, at any ``t``, with the result of the checked path; an argument it refuses
+    still reaches the door, whose checked path names it.  (A kernel that depends on ``t`` and
+    ``p``: ``test_algorithm_calls.py::test_time_and_parameters_reach_the_kernel_whatever_set_them_last``.)"""
+    assert rta.algorithm_kernels(tree, "aba") == "flat"
+    d = rta.door(tree, "aba")
+    assert d.free is d.fast is not None
+    x = state(tree, 9)
+    ref = rta.call(tree, d.kernel, (x[0], x[1], x[3]), None, 0.0)
+    entered = []
+    door_call = rta.Door.__call__
+    monkeypatch.setattr(rta.Door, "__call__", lambda self, *a: entered.append(1) or door_call(self, *a))
+    np.testing.assert_array_equal(nc.aba(tree, x[0], x[1], x[3], t=2.0), ref)
+    out = np.empty(tree.joint_space.nv)
+    assert nc.aba(tree, x[0], x[1], x[3], out=out) is out
+    np.testing.assert_array_equal(out, ref)
+    assert entered == []
+    with pytest.raises(ShapeError, match="tau"):
+        nc.aba(tree, x[0], x[1], x[3][:-1])
+    assert entered == [1]
+
+
+def _sliders(name: str, masses, frames) -> nc.Model:
+    """Bodies of ``masses`` on prismatic joints along z, joint k from the body ``frames[k]`` (−1: the ground)."""
+    s = nc.System(name, gravity=(0.0, 0.0, -9.81))
+    bodies = [s.add_body(f"b{k}", mass=m, inertia=np.diag([0.1, 0.2, 0.25]) * m, position=(0.5, 0.0, 0.0))
+              for k, m in enumerate(masses)]
+    for k, (b, f) in enumerate(zip(bodies, frames)):
+        s.add_joint(nc.Prismatic(s.ground if f < 0 else bodies[f], b, at=(0.5, 0.0, 0.0), axis=(0, 0, 1),
+                                 name=f"z{k}"))
+    return s.build()
+
+
+def test_a_singular_or_non_finite_aba_on_the_c_caller_is_refused_naming_why():
+    """On the straight path a singular mass matrix and a non-finite result still raise the
+    :class:`ModelError` saying which: two coaxial sliders with a massless (1e-15 kg) body
+    between them (M = [[m1 + m2, m2], [m2, m2]]: relative pivot m1 / (m1 + m2)), and one slider
+    of 1e-250 kg pushed by 1e100 N (a = τ / m = 1e350 overflows; 1 N gives the closed form 1e250 − g)."""
+    coaxial = _sliders("coaxial_sliders", (1e-15, 1.0), (-1, 0))
+    assert rta.door(coaxial, "aba").free is not None
+    with pytest.raises(ModelError, match="mass matrix is singular"):
+        nc.aba(coaxial, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0])
+    feather = _sliders("feather_slider", (1e-250,), (-1,))
+    assert rta.door(feather, "aba").free is not None
+    assert nc.aba(feather, [0.0], [0.0], [1.0]) == pytest.approx([1e250 - 9.81], rel=1e-12)
+    with pytest.raises(ModelError, match="result is not finite"):
+        nc.aba(feather, [0.0], [0.0], [1e100])

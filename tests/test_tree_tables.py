@@ -317,13 +317,15 @@ def test_joint_simulation_tables_equal_flat(tree, library):
 
 def test_auto_uses_the_tables_for_a_covered_tree_only_without_a_compiler(tree, library, monkeypatch):
     """``kernels="auto"`` keeps the faster flat kernels where a compiler can build them and
-    takes the tables where none can."""
+    takes the tables where none can (the CRBA; this tree's ABA, of more than 12 rates, is the
+    tables' anyway)."""
     from ncgen.model.data import model_data
 
-    assert rta.algorithm_kernels(tree, "aba") == "flat"
+    assert rta.algorithm_kernels(tree, "crba") == "flat"
+    assert rta.algorithm_kernels(tree, "aba") == "tables" and tree.joint_space.nv > rta.TABLES_ABA_RATES
     monkeypatch.setattr(rta, "compiler_present", lambda cc=None: False)
-    monkeypatch.delitem(model_data(tree).algorithm_kernels, ("aba", None), raising=False)
-    assert rta.algorithm_kernels(tree, "aba") == "tables"
+    monkeypatch.delitem(model_data(tree).algorithm_kernels, ("crba", None), raising=False)
+    assert rta.algorithm_kernels(tree, "crba") == "tables"
 
 
 URDF = """<robot name="{name}">
@@ -508,6 +510,74 @@ def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     assert compiled[3:] == ["derivatives", "edge_spherical", "body"]
 
 
+
+def test_a_unit_loaded_under_other_flags_is_never_reused(monkeypatch):
+    """The tree library's loaded units, the bound tables and their algorithms are kept per
+    process by the flags of the units (``cflags`` and ``$NCGEN_CFLAGS``): under other flags
+    ``table_algorithm`` binds the tables again to a library of its own, which loads the unit
+    compiled with those flags (recorded here, not compiled), and the earlier ones are found
+    again under their own flags."""
+    import ncgen.runtime.tree_library as tl
+
+    model = small_tree(f"flags_tree_{os.getpid()}")
+    k = tl.table_algorithm(model, "aba")
+    assert tl.table_algorithm(model, "aba") is k and k.tree.library is tl.load_tree_library()
+    flags = os.environ.get("NCGEN_CFLAGS")
+    loads = []
+
+    class Loaded(Exception):
+        pass
+
+    def unit_library(unit, cflags=None):
+        loads.append((unit, cflags, os.environ["NCGEN_CFLAGS"]))         # what cached_library compiles with
+        raise Loaded
+
+    monkeypatch.setattr(tl, "unit_library", unit_library)
+    monkeypatch.setenv("NCGEN_CFLAGS", f"{flags or ''} -DNCGEN_OTHER_FLAGS")
+    assert tl.load_tree_library() is not k.tree.library
+    assert tl.bound_tree(model) is not k.tree and tl.bound_tree(model).library is tl.load_tree_library()
+    with pytest.raises(Loaded):
+        tl.table_algorithm(model, "aba")
+    assert loads == [("forward", None, f"{flags or ''} -DNCGEN_OTHER_FLAGS")]
+    monkeypatch.undo()
+    assert tl.table_algorithm(model, "aba") is k and tl.load_tree_library() is k.tree.library
+
+
+
+def test_a_library_built_at_given_flags_is_found_under_those_flags_only(tmp_path, monkeypatch):
+    """The compile cache's index of a shared library (the tree library's units, the element
+    library) names the flags it was built with, given (``UNIT_CFLAGS``) or ``$NCGEN_CFLAGS``: a
+    library built at -O1 is not taken for -O3 or ncgen's defaults, nor the reverse; the same flags
+    from the environment find it (compiles recorded here, not run)."""
+    from types import SimpleNamespace
+
+    import ncgen.codegen.compile_cache as cc
+    import ncgen.runtime.table_library as tab
+
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("NCGEN_CFLAGS", raising=False)
+    built = []
+
+    def compile_package(out, cflags=None, env_flags=True):
+        built.append(cflags)
+        library = tmp_path / f"probe_{len(built)}.so"
+        library.write_text(str(cflags))
+        return SimpleNamespace(path=library, compiler=SimpleNamespace(version="cc 12"))
+
+    monkeypatch.setattr(cc, "compile_package", compile_package)
+    monkeypatch.setattr(tab, "entry_problem", lambda d, library: None if library.exists() else "missing")
+    monkeypatch.setattr(tab, "installed_library", lambda *a: None)
+    source = "s" * 64
+    paths = {flags: tab.cached_library("probe", source, lambda out: out, "probe", flags)[0]
+             for flags in ("-O1", "-O3", None)}
+    assert built == ["-O1", "-O3", None] and len(set(paths.values())) == 3
+    assert tab.cached_library("probe", source, lambda out: out, "probe", "-O3") == (paths["-O3"], False)
+    assert tab.library_ready("probe", source, "-O1") and not tab.library_ready("probe", source, "-O2")
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O1")
+    assert tab.cached_library("probe", source, lambda out: out, "probe") == (paths["-O1"], False)
+    assert not tab.library_ready("probe", source, "-O2") and len(built) == 3
+
+
 #: Bodies of mass 1 sliding freely along z on the ground (a = τ − g each) beside a small mimic tree:
 #: with them it has more than 12 rates (NCGEN_TREE_DENSE_NV of ncgen_tree_tables.h, up to which
 #: forward dynamics is a Cholesky of M_i), so its forward dynamics runs the articulated-body algorithm.
@@ -595,6 +665,32 @@ def small_tree(name: str):
     s.add_joint(nc.Revolute(s.ground, b1, at=(0.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0), name="hinge"))
     s.add_joint(nc.Prismatic(b1, b2, at=(0.8, 0.0, 0.0), axis=(1.0, 0.0, 0.0), name="slide"))
     return s.build()
+
+
+def test_auto_runs_the_aba_of_a_tree_of_more_than_12_rates_on_the_tables():
+    """``kernels="auto"`` takes the tables' articulated-body loops for the ABA of a tree of
+    more than :data:`~ncgen.runtime.tree_algorithm_kernels.TABLES_ABA_RATES` rates (a hinge and
+    a slider beside 11 free sliders: 13) and the flat kernel up to them; its accelerations
+    equal the flat kernel's (1e-12) and, for the free sliders of mass 1, the closed form
+    a = τ − g; the call goes straight to the tables' C caller."""
+    s = nc.System(f"auto_aba_tree_{os.getpid()}", gravity=(0.0, 0.0, -G))
+    b1 = s.add_body("b1", mass=1.3, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.4, 0.0, 0.1))
+    b2 = s.add_body("b2", mass=0.8, inertia=np.diag([0.05, 0.06, 0.07]), position=(0.9, 0.1, 0.0))
+    s.add_joint(nc.Revolute(s.ground, b1, at=(0.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0), name="hinge"))
+    s.add_joint(nc.Prismatic(b1, b2, at=(0.8, 0.0, 0.0), axis=(1.0, 0.0, 0.0), name="slide"))
+    add_free_sliders(s)
+    model = s.build()
+    assert model.joint_space.nv == rta.TABLES_ABA_RATES + 1
+    assert rta.algorithm_kernels(model, "aba") == "tables" and "measures faster" in rta.kernels_reason(model, "aba")
+    assert rta.algorithm_kernels(model, "crba") == "flat"
+    assert rta.algorithm_kernels(small_tree(f"auto_aba_small_{os.getpid()}"), "aba") == "flat"
+    rng = np.random.default_rng(13)
+    qj, vj, tau = (rng.uniform(-1, 1, model.joint_space.nv) for _ in range(3))
+    a = nc.aba(model, qj, vj, tau)
+    assert rta.door(model, "aba").tables and rta.door(model, "aba").free is not None
+    np.testing.assert_allclose(a, nc.aba(model, qj, vj, tau, kernels="flat"), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a[2:], tau[2:] - G, rtol=0, atol=1e-12)
+
 
 
 def test_rate_kernels_only_where_the_position_rates_are_not_the_rates():

@@ -59,8 +59,9 @@ class ModelData:
     #: ``(TreeTables or None, UnsupportedTree or None)``: the model's tree tables
     #: (:func:`ncgen.codegen.tree_tables.tree_tables`).
     tree_tables: tuple | None = None
-    #: ``{name: TreeTableAlgorithm}``: the tree library's algorithms bound to the model's tables
-    #: (:func:`ncgen.runtime.tree_library.table_algorithm`).
+    #: ``{(name, library key): TableAlgorithm}``, ``{(None, library key): BoundTree}``: the tree
+    #: library's algorithms bound to the model's tables, per the flags of the library's units
+    #: (:func:`ncgen.runtime.tree_library.table_algorithm`, ``library_key``).
     table_algorithms: dict = field(default_factory=dict)
     #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
     #: indices None when not (:func:`ncgen.runtime.tree_algorithm_kernels.rnea_applies`).

@@ -119,10 +119,11 @@ def compiler_path() -> str | None:
     return next((p for p in (shutil.which(n) for n in CANDIDATES) if p is not None), None)
 
 
-def _index(prefix: str, source: str, compiler: str, env_cflags: str | None = None) -> Path:
-    """The index file of a library of ``source`` built by ``compiler`` (with ``$NCGEN_CFLAGS``
-    ``env_cflags``, if set, part of its name: builds of other flags are other libraries)."""
-    tag = compiler if env_cflags is None else f"{compiler}\0{env_cflags}"
+def _index(prefix: str, source: str, compiler: str, cflags: str | None = None) -> Path:
+    """The index file of a library of ``source`` built by ``compiler`` with the flags ``cflags``
+    (:func:`effective_cflags`: given, else ``$NCGEN_CFLAGS``; part of its name unless None, ncgen's
+    defaults: builds of other flags are other libraries)."""
+    tag = compiler if cflags is None else f"{compiler}\0{cflags}"
     ckey = hashlib.sha256(tag.encode()).hexdigest()[:12]
     return cache_dir() / f"{prefix}-{source[:20]}-{ckey}.json"
 
@@ -157,7 +158,7 @@ def library_ready(prefix: str, source: str, cflags: str | None = None) -> bool:
         return True
     if compiler is None:
         return any(_indexed(index) is not None for index in cache_dir().glob(f"{prefix}-{source[:20]}-*.json"))
-    return _indexed(_index(prefix, source, compiler, os.environ.get("NCGEN_CFLAGS"))) is not None
+    return _indexed(_index(prefix, source, compiler, effective_cflags(cflags))) is not None
 
 
 def effective_cflags(cflags: str | None) -> str | None:
@@ -173,7 +174,6 @@ def cached_library(prefix: str, source: str, write, package: str, cflags: str | 
     suite's fast tier builds the libraries at -O0 beside the default ones), else ncgen's
     defaults.  A library the install built with the same keys and flags comes first
     (:func:`~ncgen.runtime.installed_libraries.installed_library`, verified by its sha256)."""
-    env_cflags = os.environ.get("NCGEN_CFLAGS") if cflags is None else None
     cflags = effective_cflags(cflags)
     compiler = compiler_path()
     installed = installed_library(prefix, source, compiler, cflags)
@@ -186,7 +186,7 @@ def cached_library(prefix: str, source: str, write, package: str, cflags: str | 
                 return library, False
         raise CompilerNotFound(f"no C compiler found (looked for $CC, {', '.join(CANDIDATES)} on PATH) and no "
                                f"{package} library of ncgen {__version__} in the compile cache {cache_dir()}")
-    index = _index(prefix, source, compiler, env_cflags)
+    index = _index(prefix, source, compiler, cflags)
     library = _indexed(index)
     if library is not None:
         return library, False

@@ -20,7 +20,8 @@ compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` �
 own SX functions compiled per model, ``"auto"`` (default) — the tables for RNEA wherever they
 cover a model without parameters (:data:`TABLES_FIRST`: one call or a batch, they cost
 0.55–0.9× the flat RNEA on the Panda, xArm7, Solo12 and Talos, about as much, 0.8–1.2×, on
-the UR5 and UR10), for the other
+the UR5 and UR10), and for the ABA of trees of more than :data:`TABLES_ABA_RATES` rates
+(Talos: about 0.7× the flat ABA from Python), for the other
 algorithms flat wherever a C compiler is present or the flat kernel is already built in this
 process with optimisation (never one compiled at -O0 for another ``$NCGEN_CFLAGS``; the tables cost 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA:
 :mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py), else the tables when they
@@ -208,6 +209,24 @@ KERNELS = ("auto", "tables", "flat")
 #: ones: benchmarks/call_overhead.py ``--kernels``).
 TABLES_FIRST = frozenset({"rnea"})
 
+#: Trees of more independent rates than this (the tables' dense-Cholesky limit,
+#: ``NCGEN_TREE_DENSE_NV``) run ``aba`` on the tables' articulated-body loops under
+#: ``kernels="auto"``: the flat ABA of a large tree is long straight-line code (Talos: 25 k CasADi
+#: instructions, compiled at -O1 in 9–36 s of gcc) that the caches of a shared machine do not
+#: hold; from Python Talos's tables' ABA took 0.53–0.58 / 0.62–0.65 (min / median) of
+#: ``pinocchio.aba``'s time against the flat kernel's 0.75–0.81 / 0.88–1.06, while on the xArm7
+#: (0.78 / 0.81 against 0.80 / 0.85) and the UR10 (0.69 / 0.76 against 0.59 / 0.62) the flat ABA
+#: holds (AMD EPYC, load 6–8, 9 interleaved rounds).
+TABLES_ABA_RATES = 12
+
+
+def _tables_first(model, name: str) -> bool:
+    """Whether ``kernels="auto"`` tries the tables first for the algorithm ``name`` of ``model``
+    (:data:`TABLES_FIRST`, :data:`TABLES_ABA_RATES`; models without parameters)."""
+    if model.np:
+        return False
+    return name in TABLES_FIRST or (name == "aba" and len(rnea_applies(model) or ()) > TABLES_ABA_RATES)
+
 
 def algorithm_kernels(model, name: str, kernels: str = "auto") -> str:
     """``"tables"`` or ``"flat"``: the kernels the algorithm ``name`` of ``model`` uses for the
@@ -233,7 +252,7 @@ def _choice(model, name: str, kernels: str) -> tuple[str, str]:
         if kernels == "tables":
             table_algorithm(model, name)
         return kernels, "chosen (kernels=)"
-    if name in TABLES_FIRST and not model.np:
+    if _tables_first(model, name):
         try:
             table_algorithm(model, name)
             return "tables", f"the tables' {name} measures faster than the flat kernel"
@@ -254,8 +273,10 @@ def _choice(model, name: str, kernels: str) -> tuple[str, str]:
 def kernel_of(model, name: str, kernels: str):
     """The kernel of :func:`algorithm_kernels`' choice: a :class:`AlgorithmKernel` or a
     :class:`~ncgen.runtime.tree_library.TableAlgorithm`."""
+    from ncgen.runtime.tree_library import table_algorithm
+
     if algorithm_kernels(model, name, kernels) == "tables":
-        return model_data(model).table_algorithms[name]
+        return table_algorithm(model, name)
     return algorithm_kernel(model, name)
 
 
@@ -268,8 +289,10 @@ class Door:
     in C.  Whatever it refuses, other times or parameters, and
     rows of states take the checked path (:func:`call`, :func:`batch`), whose error names the
     argument.  ``flags``: the ``$NCGEN_CFLAGS`` it was bound under (None: ncgen's defaults).
-    ``free``: the door caller itself where any time goes to it (the tables' algorithms, which
-    depend on no time; else None), for callers that skip this object's frame (:func:`rnea`)."""
+    ``free``: the door caller itself where any time and the default parameters go to it (the
+    tables' algorithms, and flat kernels whose outputs depend on neither ``t`` nor ``p``: the
+    ABA of a model without time-dependent forces or parameters; else None), for callers that
+    skip this object's frame (:func:`rnea`, :func:`aba`)."""
 
     __slots__ = ("model", "kernel", "fast", "tables", "flags", "free")
 
@@ -278,7 +301,7 @@ class Door:
         k = self.kernel = kernel_of(model, name, kernels)
         self.model, self.tables = model, not isinstance(k, AlgorithmKernel)
         self.fast = k.door_caller(quaternion_offsets(model.joint_space))
-        self.free = self.fast if self.tables else None
+        self.free = self.fast if self.tables or not _depends_on_time_or_parameters(k) else None
 
     def __call__(self, args: tuple, p, t: float, out):
         k, fast = self.kernel, self.fast
@@ -298,6 +321,13 @@ class Door:
         model, k = self.model, self.kernel
         result = batch(model, k, args, p, t, self.fast) if np.ndim(args[0]) == 2 else call(model, k, args, p, t)
         return result if out is None else write_out(out, result, k.name)
+
+
+def _depends_on_time_or_parameters(k: AlgorithmKernel) -> bool:
+    """Whether an output of the flat kernel ``k`` depends on its time or parameter input (CasADi's
+    structural dependency: true also for a term that happens to vanish)."""
+    f = k.direct.function
+    return any(any(f.which_depends(f.name_in(i), f.name_out(), 1, True)) for i in (0, f.n_in() - 1))
 
 
 def door(model, name: str, kernels: str = "auto") -> Door:
@@ -467,7 +497,8 @@ def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto", ou
 
 def through(d: Door, x, y, z, p, t: float, out):
     """``d((x, y, z), p, t, out)``, straight to its C caller when it takes any time (``Door.free``)
-    and ``p`` is None; whatever that refuses takes the door (whose checked path names it)."""
+    and ``p`` is None; whatever that refuses, and a singular or non-finite result, takes the door
+    (whose checked path names the argument, or raises the kernel's :class:`ModelError`)."""
     free = d.free
     if free is not None and p is None:
         try:
@@ -486,7 +517,7 @@ def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) 
 
 def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``aj``: joint accelerations under the efforts ``tau`` of the independent rates (Pinocchio's ``aba``)."""
-    return door(model, "aba", kernels)((qj, vj, tau,), p, t, out)
+    return through(door(model, "aba", kernels), qj, vj, tau, p, t, out)
 
 
 def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto",

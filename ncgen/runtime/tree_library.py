@@ -9,13 +9,13 @@ install .`` compiles every unit into the package (:mod:`ncgen.runtime.installed_
 
 Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA, the joint
 loop), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with the rate kernels of the spherical
-and free joints (the other kinds have q̇ = w), loops at :data:`UNIT_CFLAGS` (-O1, the inverse unit -O3); the kernel units
+and free joints (the other kinds have q̇ = w), loops at :data:`UNIT_CFLAGS` (-O1, the forward unit -O2, the inverse unit -O3); the kernel units
 ``local_<kind>``, ``edge_<kind>`` and ``body``, whose kernels :class:`TreeLibrary` sets in an
 algorithm unit (``set_kernel``) for the kinds of the trees it serves.  One library of
 everything took 30 s of CPU to compile (18 s of it the kernels
 of every kind and their derivatives at -O2, one translation unit, 2.4 s the loops); the Panda's
-joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18; -O1 costs
-+9 % instructions per ABA against -O2 by callgrind, -Og +39 %), and without forward dynamics'
+joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18, 1.5 s at -O2,
+load 5–8; -O1 costs +7–9 % instructions per ABA against -O2 by callgrind, -Og +39 %), and without forward dynamics'
 Cholesky fallback (the inverse unit's, set when a tree first needs it: :meth:`TreeLibrary.set_fallback`):
 the whole forward unit's gcc 1.41 → 1.19 s of CPU (median of 5 interleaved, load 18).  ``ncgen simulate`` of a
 URDF robot starts that compile in a background thread before it reads the robot (:func:`compile_ahead`), so
@@ -163,9 +163,12 @@ ROW = 5
 #: Flags of the algorithm units' loops (``-O1``: …; the inverse unit's RNEA and CRBA at ``-O3``: the
 #: batched and single-state RNEA run 20–25 % faster than at -O1 — Talos 4.9 → 3.8 µs, UR10 0.79 → 0.56
 #: µs a state, a C harness, 5 interleaved rounds, AMD EPYC at load 16 — for 0.7 s more of gcc, once;
+#: the forward unit's ABA and joint loop at ``-O2``: ABA instructions a state by callgrind
+#: (benchmarks/tree_tables_callgrind.py) xArm7 12.8 k → 11.9 k, Talos 73.1 k → 68.2 k, for 0.2 s
+#: more of gcc (1.3 → 1.5 s CPU, load 5–8; -O3: 11.9 k, 64.7 k for 3.1 s);
 #: bit-identical results: no flag reorders floating-point arithmetic); the kernel units take the
 #: compile cache's defaults.
-UNIT_CFLAGS = {"forward": "-O1", "inverse": "-O3", "derivatives": "-O1"}
+UNIT_CFLAGS = {"forward": "-O2", "inverse": "-O3", "derivatives": "-O1"}
 
 
 def index_prefix(unit: str) -> str:
@@ -335,14 +338,23 @@ class TreeLibrary:
             return True
 
 
-_LOADED: dict[str | None, TreeLibrary] = {}
+#: The loaded tree libraries of this process by :func:`library_key`.
+_LOADED: dict[tuple[str | None, str | None], TreeLibrary] = {}
+
+
+def library_key(cflags: str | None = None) -> tuple[str | None, str | None]:
+    """``(cflags, $NCGEN_CFLAGS)``: what the units a :class:`TreeLibrary` loads are compiled with
+    (:func:`unit_cflags`), so that a unit built under other flags is never reused."""
+    return cflags, os.environ.get("NCGEN_CFLAGS")
 
 
 def load_tree_library(cflags: str | None = None) -> TreeLibrary:
-    """The tree library of this process (its units compiled and loaded as trees need them)."""
-    if cflags not in _LOADED:
-        _LOADED[cflags] = TreeLibrary(cflags)
-    return _LOADED[cflags]
+    """The tree library of this process for ``cflags`` and the environment's ``$NCGEN_CFLAGS``
+    (its units compiled and loaded as trees need them)."""
+    key = library_key(cflags)
+    if key not in _LOADED:
+        _LOADED[key] = TreeLibrary(cflags)
+    return _LOADED[key]
 
 
 class BoundTree:
@@ -572,23 +584,23 @@ def table_algorithm(model, name: str) -> TableAlgorithm:
     :class:`~ncgen.errors.CompilerNotFound` with no compiler and no library in the cache)."""
     from ncgen.model.data import model_data
 
-    data = model_data(model)
-    k = data.table_algorithms.get(name)
+    data, key = model_data(model), (name, library_key())
+    k = data.table_algorithms.get(key)
     if k is None:
-        k = data.table_algorithms[name] = TableAlgorithm(bound_tree(model), name)
+        k = data.table_algorithms[key] = TableAlgorithm(bound_tree(model), name)
     return k
 
 
 def bound_tree(model) -> BoundTree:
-    """``model``'s tree tables bound once per model (raises
+    """``model``'s tree tables bound once per model and :func:`library_key` (raises
     :class:`~ncgen.codegen.tree_tables.UnsupportedTree`)."""
     from ncgen.codegen.tree_tables import tree_tables
     from ncgen.model.data import model_data
 
-    data = model_data(model)
-    tree = data.table_algorithms.get(None)
+    data, key = model_data(model), (None, library_key())
+    tree = data.table_algorithms.get(key)
     if tree is None:
-        tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
+        tree = data.table_algorithms[key] = BoundTree(tree_tables(model))
     return tree
 
 
