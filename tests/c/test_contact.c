@@ -312,7 +312,12 @@ static void test_contact_steps(void) {
   int status;
   mu[0] = 0.5, mu[1] = 0;
   restitution[0] = 0, restitution[1] = 0.5;
+  for (k = 0; k < N * ND; ++k) imp[k] = NAN; /* every row written: the contacts without an impulse zero */
   status = run_fixed(q0, vel0, 0, 0, h, N, 1, 0, 0, 0, q, v, 0, 0, stats, &o, &FIXED_RUN(0, 1), &done, &splits, imp);
+  for (k = 0; k < N * ND && isfinite(imp[k]); ++k) continue;
+  CHECK(k == N * ND, "impulse entry %ld not written (%g)", k, imp[k < N * ND ? k : 0]);
+  for (k = 0; (k + 1) * h < 0.99 * sqrt(2 * drop / G_P); ++k) /* mass 2 in flight: no impulse */
+    CHECK(imp[k * ND + 2] == 0 && imp[k * ND + 3] == 0, "impulse %g in flight at row %ld", imp[k * ND + 2], k);
   CHECK(status == STEP_OK && done == N && splits == 0, "status %d, %ld steps, %ld splits", status, done, splits);
   k = (long) (t_slide / h + 0.5) - 1; /* row k: the state at (k + 1) h */
   CHECK(fabs(v[k * NQ] - (v0 - mu[0] * G_P * t_slide)) < 1e-9, "x' = %.12g at t = %g", v[k * NQ], t_slide);
