@@ -58,13 +58,16 @@
  * so its true bound exceeds L + hs S_e >= L > limit: it is off as it would be with b_e taken
  * one by one, L is a lower bound of its gaps, and every later decision (a gap against 0, the
  * reach, the push-out's range, all below L or else pairs_extend() takes every b_e one by one)
- * is the same.  (Before, one axis was tested, the one along which the centres spread most: on
- * a sparse grid its intervals overlap by whole columns, about N^1.5 / 2 pairs for N sides; the
- * test on every axis keeps the argument, with fewer candidates.)  The boxes that overlap on
- * every axis are found by a uniform grid (pairs_grid(): cells the size of the widest finite
- * box, a power of 2; the sides sorted by cell from the order of the last sweep, by insertion:
- * nearly sorted from step to step), so a step costs O(NS + the pairs in neighbouring cells)
- * box tests and O(the overlapping pairs) bound computations instead of one per element.
+ * is the same.  The boxes that overlap on every axis are found by a sweep (pairs_sweep_boxes())
+ * along the axis on which the centres spread most, the sides sorted by their boxes' lower ends
+ * there from the order of the last sweep (insertion: nearly sorted from step to step), and the
+ * other axes tested before an element becomes a candidate, so a step costs O(NS + the pairs whose
+ * boxes overlap on that axis) comparisons and O(the pairs whose boxes overlap on every axis) bound
+ * computations instead of one per element.  (Tested on one axis alone, a sparse grid's intervals
+ * overlap by whole columns, about N^1.5 / 2 pairs of N sides, each a bound computed; now each is
+ * a comparison of the other axes.  A uniform grid over the boxes, O(NS + the pairs in neighbouring
+ * cells, keyed by 3 cell numbers), measured 1.3-6x slower than this sweep from 1000 down to 20
+ * sides on a sparse grid, 2.5-3.6x on heaps of 20-50: benchmarks/issue34_targets.md.)
  * Exactness: the step compares a gap with a threshold
  * (<= 0: closed; < GAP_REACH h/2 max |U_N|: about to close; < PENETRATION_TOL + twice the
  * deepest: pushed out with the others; g - h/2 W X j <= 0: closed in repeat_step()); an
@@ -372,77 +375,32 @@ static int pair_boxes_meet(const casadi_real *a, const casadi_real *b, int dim) 
   return 1;
 }
 
-/* Lexicographic comparison of two cells (3 coordinates). */
-static int pair_cell_cmp(const casadi_real *x, const casadi_real *y) {
-  int d;
-  for (d = 0; d < 3; ++d)
-    if (x[d] != y[d]) return x[d] < y[d] ? -1 : 1;
-  return 0;
-}
-
-/* The pairs of n boxes (iv: 2 dim per box, dim <= 3) that overlap on every axis, each once, given
- * to found(ctx, a, b); returns their number.  A uniform grid: the cell c is the least power of 2
- * at least the widest finite box, a box's cell is floor(lo / c) per axis (exact: c a power of 2),
- * so two boxes that overlap have cells at most 1 apart on every axis (|lo_a - lo_b| <= c), and
- * the boxes sorted by cell (lexicographic; ord: the order of the last call, by insertion) meet
- * only the boxes after them in the same cell and in the 13 cells after theirs (5 runs of the
- * sorted order, each start a pointer that only moves forward).  A box that is not finite, or
- * more than 1e15 cells out, is tested against every other.  key: 3 n scratch; O(n + the pairs
- * in neighbouring cells) after a sort of the nearly sorted order. */
-static long pairs_grid(const casadi_real *iv, int dim, int n, casadi_real *key, int *ord,
-                       void (*found)(void *, int, int), void *ctx) {
-  static const int run[5][2] = {{0, 0}, {0, 1}, {1, -1}, {1, 0}, {1, 1}};
-  casadi_real c = 0, t[3], u[3];
-  int i, j, k, d, r, m = 0, at[5] = {0, 0, 0, 0, 0};
+/* The pairs of n boxes (iv: lo, hi per axis, 2 dim per box) that overlap on every axis, each
+ * once, given to found(ctx, a, b); returns their number.  A sweep along axis: ord (the order of
+ * the last call) sorted by lo on that axis, by insertion (O(n + the pairs out of order)), then
+ * each box against those after it whose lo is at most its hi there, the other axes tested
+ * before a pair is given: O(n + the pairs that overlap on that axis) box tests. */
+static long pairs_sweep_boxes(const casadi_real *iv, int dim, int n, int axis, int *ord,
+                              void (*found)(void *, int, int), void *ctx) {
+  int i, j;
   long count = 0;
-  for (k = 0; k < n; ++k)
-    for (d = 0; d < dim; ++d)
-      if (iv[2 * dim * k + 2 * d + 1] - iv[2 * dim * k + 2 * d] < INFINITY)
-        c = fmax(c, iv[2 * dim * k + 2 * d + 1] - iv[2 * dim * k + 2 * d]);
-  (void) frexp(c > 0 ? c : 1, &d);
-  c = ldexp(1, d); /* >= the widest */
-  for (k = 0; k < n; ++k) {
-    casadi_real *kk = key + 3 * k;
-    for (d = 0; d < 3; ++d) kk[d] = d < dim ? floor(iv[2 * dim * k + 2 * d] / c) : 0;
-    for (d = 0; d < dim; ++d)
-      if (!(fabs(kk[d]) < 1e15) || !(iv[2 * dim * k + 2 * d + 1] < INFINITY)) kk[0] = kk[1] = kk[2] = INFINITY;
-    m += kk[0] < INFINITY;
+  for (i = 1; i < n; ++i) {
+    const int k = ord[i];
+    for (j = i; j > 0 && iv[2 * dim * ord[j - 1] + 2 * axis] > iv[2 * dim * k + 2 * axis]; --j) ord[j] = ord[j - 1];
+    ord[j] = k;
   }
-  for (i = 1; i < n; ++i) { /* insertion from the last order: the boxes tested against all last */
-    const int b = ord[i];
-    for (j = i; j > 0 && pair_cell_cmp(key + 3 * ord[j - 1], key + 3 * b) > 0; --j) ord[j] = ord[j - 1];
-    ord[j] = b;
-  }
-  for (i = 0; i < m; ++i) {
-    const int a = ord[i];
-    const casadi_real *ka = key + 3 * a, *ba = iv + 2 * dim * a;
-    for (r = 0; r < 5; ++r) {
-      t[0] = u[0] = ka[0] + run[r][0];
-      t[1] = u[1] = ka[1] + run[r][1];
-      t[2] = ka[2] - 1;
-      u[2] = ka[2] + 1;
-      if (r == 0) j = i + 1; /* its own cell after it, and the next */
-      else {
-        while (at[r] < m && pair_cell_cmp(key + 3 * ord[at[r]], t) < 0) ++at[r];
-        j = at[r];
-      }
-      for (; j < m && pair_cell_cmp(key + 3 * ord[j], u) <= 0; ++j)
-        if (pair_boxes_meet(ba, iv + 2 * dim * ord[j], dim)) {
-          found(ctx, a, ord[j]);
-          ++count;
-        }
-    }
-  }
-  for (i = m; i < n; ++i) /* the boxes tested against all: with every box before them */
-    for (j = 0; j < i; ++j)
-      if (pair_boxes_meet(iv + 2 * dim * ord[i], iv + 2 * dim * ord[j], dim)) {
+  for (i = 0; i < n; ++i) {
+    const casadi_real *a = iv + 2 * dim * ord[i], hi = a[2 * axis + 1];
+    for (j = i + 1; j < n && iv[2 * dim * ord[j] + 2 * axis] <= hi; ++j)
+      if (pair_boxes_meet(a, iv + 2 * dim * ord[j], dim)) {
         found(ctx, ord[i], ord[j]);
         ++count;
       }
+  }
   return count;
 }
 
-/* The swept elements of sides a and b made candidates (pairs_grid()'s found, ctx the workspace). */
+/* The swept elements of sides a and b made candidates (pairs_sweep_boxes()'s found, ctx the workspace). */
 static void pairs_meet(void *ctx, int a, int b) {
   workspace *ws = ctx;
   const int *ptr = ws->padj, *ent = ws->padj + PAIR_NS + 1, s = a < b ? a : b, t = a + b - s;
@@ -459,16 +417,27 @@ static void pairs_meet(void *ctx, int a, int b) {
  * exact for those that may be below level + sk + hs S_e, the level L = level + sk for the
  * others (the header's comment); ws->plim = L. */
 static void pairs_sweep(workspace *ws, casadi_real level, casadi_real hs) {
-  casadi_real rmax = 0, L;
-  int i, k;
+  casadi_real rmax = 0, spread = -1, L;
+  int i, k, d, axis = 0;
   if (ws->nalw < 0) pairs_init(ws);
   for (k = 0; k < PAIR_NS; ++k) rmax = fmax(rmax, ws->psb[(DC + 3) * k + DC]);
+  for (d = 0; d < DC && PAIR_NS; ++d) { /* the axis along which the centres spread most */
+    casadi_real lo = ws->psb[d], hi = lo;
+    for (k = 1; k < PAIR_NS; ++k) {
+      lo = fmin(lo, ws->psb[(DC + 3) * k + d]);
+      hi = fmax(hi, ws->psb[(DC + 3) * k + d]);
+    }
+    if (hi - lo > spread) {
+      spread = hi - lo;
+      axis = d;
+    }
+  }
   L = level + rmax + 1e-6;
   pairs_uncandidate(ws);
   for (i = 0; i < ws->nalw; ++i) pair_candidate(ws, ws->palw[i]);
   for (k = 0; k < PAIR_NS; ++k)
     pair_box(ws->psb + (DC + 3) * k, DC, L, hs, rmax, ws->pkmin, ws->pdmax, ws->pint + 2 * DC * k);
-  pairs_grid(ws->pint, DC, PAIR_NS, ws->pkey, ws->pord, pairs_meet, ws);
+  pairs_sweep_boxes(ws->pint, DC, PAIR_NS, axis, ws->pord, pairs_meet, ws);
   ws->plim = L;
 }
 

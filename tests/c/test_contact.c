@@ -447,34 +447,34 @@ static void test_broad_phase(void) {
   free(block);
 }
 
-/* pairs_grid()'s found: each pair marked once in a table of n x n (ctx), a second report counted wrong. */
-enum { GRID_NMAX = 100 };
+/* pairs_sweep_boxes()'s found: each pair marked once in a table of n x n (ctx), a second report counted wrong. */
+enum { SEEN_NMAX = 100 };
 typedef struct {
-  unsigned char seen[GRID_NMAX * GRID_NMAX];
+  unsigned char seen[SEEN_NMAX * SEEN_NMAX];
   int wrong;
-} grid_found;
-static void grid_mark(void *ctx, int a, int b) {
-  grid_found *f = ctx;
-  f->wrong += a == b || f->seen[a * GRID_NMAX + b];
-  f->seen[a * GRID_NMAX + b] = f->seen[b * GRID_NMAX + a] = 1;
+} seen_pairs;
+static void mark_pair(void *ctx, int a, int b) {
+  seen_pairs *f = ctx;
+  f->wrong += a == b || f->seen[a * SEEN_NMAX + b];
+  f->seen[a * SEEN_NMAX + b] = f->seen[b * SEEN_NMAX + a] = 1;
 }
 
-/* The sweep's grid (pair_box(), pairs_grid()) on 300 random scenes of up to GRID_NMAX sides in
+/* The sweep (pair_box(), pairs_sweep_boxes()) on 300 random scenes of up to SEEN_NMAX sides in
  * 2-D and 3-D, moved three times each (the kept order nearly sorted): spread and dense scenes,
- * sides whose rotation makes their box whole, a side far out (tested against all), and sparse
+ * sides whose rotation makes their box whole, a side far out, and sparse
  * 3-D grids of spheres 0.2 apart where one axis's intervals overlap by whole columns.  Against
  * every pair's box test (all axes): the same pairs, each once, and no pair whose lower bound is
  * within the level left off; on the grids fewer pairs than one axis's intervals give. */
 static void test_sweep_random(void) {
-  enum { NMAX = GRID_NMAX, DMAX = 3 };
-  static grid_found f;
-  casadi_real sb[NMAX * (DMAX + 3)], iv[2 * DMAX * NMAX], key[3 * NMAX];
+  enum { NMAX = SEEN_NMAX, DMAX = 3 };
+  static seen_pairs f;
+  casadi_real sb[NMAX * (DMAX + 3)], iv[2 * DMAX * NMAX];
   int ord[NMAX], seed, moves, missed = 0, wrong = 0, found = 0, near = 0, grids = 0;
   long one_axis = 0, grid_pairs = 0;
   unsigned long long state = 12345;
 #define RAND01() ((state = state * 6364136223846793005ULL + 1442695040888963407ULL), (double) (state >> 11) / 9007199254740992.0)
   for (seed = 0; seed < 300; ++seed) {
-    const int grid = seed % 3 == 0, dim = grid || RAND01() < 0.5 ? 3 : 2, st = dim + 3;
+    const int grid = seed % 3 == 0, dim = grid || RAND01() < 0.5 ? 3 : 2, st = dim + 3, axis = (int) (RAND01() * dim);
     const int n = grid ? 27 + (int) (RAND01() * (NMAX - 26)) : 2 + (int) (RAND01() * (NMAX - 1));
     const int side = (int) ceil(cbrt((double) n));
     const casadi_real box = RAND01() < 0.3 ? 0.2 : 5.0, hs = RAND01() < 0.5 ? 0 : 0.02 * RAND01();
@@ -503,7 +503,8 @@ static void test_sweep_random(void) {
         rmax = fmax(rmax, sb[st * k + dim]);
       }
       for (k = 0; k < n; ++k) pair_box(sb + st * k, dim, L, hs, rmax, kmin, dmax, iv + 2 * dim * k);
-      n_found = pairs_grid(iv, dim, n, key, ord, grid_mark, &f);
+      n_found = pairs_sweep_boxes(iv, dim, n, axis, ord, mark_pair, &f);
+      for (k = 1; k < n; ++k) wrong += iv[2 * dim * ord[k - 1] + 2 * axis] > iv[2 * dim * ord[k] + 2 * axis];
       wrong += f.wrong;
       found += (int) n_found;
       for (i = 0; i < n; ++i)
@@ -519,11 +520,12 @@ static void test_sweep_random(void) {
           for (c = 0; c < dim; ++c) /* the boxes by hand, every axis */
             o &= !(iv[2 * dim * i + 2 * c] > iv[2 * dim * j + 2 * c + 1] ||
                    iv[2 * dim * j + 2 * c] > iv[2 * dim * i + 2 * c + 1]);
-          wrong += overlap != o || overlap != f.seen[i * NMAX + j]; /* the grid = all pairs' box test */
+          wrong += overlap != o || overlap != f.seen[i * NMAX + j]; /* the sweep = all pairs' box test */
           if (!f.seen[i * NMAX + j] && !(lb > L + hs * S && D >= dmax)) ++missed;
           near += lb <= L + hs * S;
-          if (grid) { /* the first axis alone */
-            one_axis += !(iv[2 * dim * i] > iv[2 * dim * j + 1] || iv[2 * dim * j] > iv[2 * dim * i + 1]);
+          if (grid) { /* the sweep's axis alone */
+            one_axis += !(iv[2 * dim * i + 2 * axis] > iv[2 * dim * j + 2 * axis + 1] ||
+                          iv[2 * dim * j + 2 * axis] > iv[2 * dim * i + 2 * axis + 1]);
             grid_pairs += overlap;
           }
         }
@@ -531,9 +533,9 @@ static void test_sweep_random(void) {
     }
   }
 #undef RAND01
-  CHECK(wrong == 0 && missed == 0, "grid: %d pairs differ from all pairs' box test, %d within the level missed", wrong,
+  CHECK(wrong == 0 && missed == 0, "sweep: %d pairs differ from all pairs' box test, %d within the level missed", wrong,
         missed);
-  CHECK(near > 100 && found > near, "the scenes have near pairs (%d) and the grid found them (%d)", near, found);
+  CHECK(near > 100 && found > near, "the scenes have near pairs (%d) and the sweep found them (%d)", near, found);
   CHECK(grids > 100 && 4 * grid_pairs < one_axis, "sparse grids: %ld pairs overlap on every axis, %ld on one", grid_pairs,
         one_axis);
 }

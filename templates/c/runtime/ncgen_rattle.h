@@ -149,8 +149,7 @@ typedef struct {
   int pb_rates;      /* whether it was given rates (1) or not (0); -1: none since layout() */
   int *pon;          /* per element: 0 skipped, 1 evaluated, 2 to be evaluated (ncgen_contact_pairs.h) */
   casadi_real *pint; /* the sweep (ncgen_contact_pairs.h): per distinct member side its box (lo, hi per axis: 2 DC) */
-  casadi_real *pkey; /* ... and its cell in the grid (3) */
-  int *pord;         /* ... the sides by cell, kept from the last sweep (PAIR_NS) */
+  int *pord;         /* ... the sides by lo on the sweep's axis, kept from the last sweep (PAIR_NS) */
   int *pover;        /* ... pairs_init()'s scratch (PAIR_NS) */
   int *padj;         /* ... per side the elements it is the first side of: CSR pointers (PAIR_NS + 1), then
                         (other side, element) by other side (2 NE) */
@@ -248,7 +247,7 @@ static size_t layout(workspace *ws, char *block) {
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
 #ifdef CONTACT_PAIRS
-  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (3 * DC + 6) + NQ +
+  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (3 * DC + 3) + NQ +
                (size_t) NE * PAIR_SLOT) * sizeof(casadi_real) + (7 * NE + 3 * PAIR_NS + 1) * sizeof(int);
 #endif
 #endif
@@ -314,8 +313,7 @@ static size_t layout(workspace *ws, char *block) {
     ws->pbq = ws->psb + PAIR_NS * (DC + 3);
     ws->pb_rates = -1;
     ws->pint = ws->pbq + NQ;
-    ws->pkey = ws->pint + 2 * DC * PAIR_NS;
-    ws->pcache = ws->pkey + 3 * PAIR_NS;
+    ws->pcache = ws->pint + 2 * DC * PAIR_NS;
     for (k = 0; k < (size_t) NE; ++k) /* every entry empty */
       ws->pcache[k * PAIR_SLOT] = ws->pcache[k * PAIR_SLOT + 1] =
           ws->pcache[k * PAIR_SLOT + 2 + PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W] = 0;
