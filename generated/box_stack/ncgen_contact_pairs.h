@@ -65,9 +65,10 @@
  * boxes overlap on that axis) comparisons and O(the pairs whose boxes overlap on every axis) bound
  * computations instead of one per element.  (Tested on one axis alone, a sparse grid's intervals
  * overlap by whole columns, about N^1.5 / 2 pairs of N sides, each a bound computed; now each is
- * a comparison of the other axes.  A uniform grid over the boxes, O(NS + the pairs in neighbouring
- * cells, keyed by 3 cell numbers), measured 1.3-6x slower than this sweep from 1000 down to 20
- * sides on a sparse grid, 2.5-3.6x on heaps of 20-50: benchmarks/issue34_targets.md.)
+ * a comparison of the other axes.  A uniform grid over the boxes, O(NS + the pairs in
+ * neighbouring cells, keyed by 3 cell numbers; commit 574e40a of branch grid38), measured 1.3-6x
+ * slower than this sweep from 1000 down to 20 sides on a sparse grid and 2.5-3.6x on heaps of
+ * 20-50 sides: benchmarks/issue34_targets.md.)
  * Exactness: the step compares a gap with a threshold
  * (<= 0: closed; < GAP_REACH h/2 max |U_N|: about to close; < PENETRATION_TOL + twice the
  * deepest: pushed out with the others; g - h/2 W X j <= 0: closed in repeat_step()); an
