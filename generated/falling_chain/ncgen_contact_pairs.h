@@ -368,11 +368,11 @@ static void pair_box(const casadi_real *sb, int dim, casadi_real L, casadi_real 
     }
 }
 
-/* Whether the boxes a and b (2 dim numbers each) overlap on every axis. */
-static int pair_boxes_meet(const casadi_real *a, const casadi_real *b, int dim) {
+/* Whether the boxes a and b (2 dim numbers each) overlap on every axis but skip. */
+static int pair_boxes_meet(const casadi_real *a, const casadi_real *b, int dim, int skip) {
   int d;
   for (d = 0; d < dim; ++d)
-    if (a[2 * d] > b[2 * d + 1] || b[2 * d] > a[2 * d + 1]) return 0;
+    if (d != skip && (a[2 * d] > b[2 * d + 1] || b[2 * d] > a[2 * d + 1])) return 0;
   return 1;
 }
 
@@ -393,7 +393,7 @@ static long pairs_sweep_boxes(const casadi_real *iv, int dim, int n, int axis, i
   for (i = 0; i < n; ++i) {
     const casadi_real *a = iv + 2 * dim * ord[i], hi = a[2 * axis + 1];
     for (j = i + 1; j < n && iv[2 * dim * ord[j] + 2 * axis] <= hi; ++j)
-      if (pair_boxes_meet(a, iv + 2 * dim * ord[j], dim)) {
+      if (pair_boxes_meet(a, iv + 2 * dim * ord[j], dim, axis)) { /* overlap on axis: lo_a <= lo_b <= hi_a */
         found(ctx, ord[i], ord[j]);
         ++count;
       }
@@ -402,7 +402,7 @@ static long pairs_sweep_boxes(const casadi_real *iv, int dim, int n, int axis, i
 }
 
 /* The swept elements of sides a and b made candidates (pairs_sweep_boxes()'s found, ctx the workspace). */
-static void pairs_meet(void *ctx, int a, int b) {
+static inline void pairs_meet(void *ctx, int a, int b) {
   workspace *ws = ctx;
   const int *ptr = ws->padj, *ent = ws->padj + PAIR_NS + 1, s = a < b ? a : b, t = a + b - s;
   int lo = ptr[s], hi = ptr[s + 1];

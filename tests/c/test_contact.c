@@ -510,7 +510,7 @@ static void test_sweep_random(void) {
       for (i = 0; i < n; ++i)
         for (j = i + 1; j < n; ++j) {
           const casadi_real *x = sb + st * i, *y = sb + st * j;
-          const int overlap = pair_boxes_meet(iv + 2 * dim * i, iv + 2 * dim * j, dim);
+          const int overlap = pair_boxes_meet(iv + 2 * dim * i, iv + 2 * dim * j, dim, -1);
           casadi_real d2 = 0, D, S, lb;
           int c, o = 1;
           for (c = 0; c < dim; ++c) d2 += (y[c] - x[c]) * (y[c] - x[c]);
