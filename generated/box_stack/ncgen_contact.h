@@ -149,6 +149,8 @@ static void forces_clear_off(workspace *ws) {
 /* Clears what the contact steps accumulate and their warm start (before a run). */
 static void contact_clear(workspace *ws) {
   memset(ws->Pacc, 0, ND * sizeof(casadi_real));
+  memset(ws->psum, 0, NK * sizeof(int));
+  ws->nsum = 0;
   memset(ws->F, 0, ND * sizeof(casadi_real));
 #ifdef CONTACT_PAIRS
   ws->pld_ok = 0; /* rebuilt from F at the next use (a caller may set F) */
@@ -163,12 +165,26 @@ static void contact_clear(workspace *ws) {
 /* The first of the contact statistics' columns, after the work (ncgen_fixed.h: put_stats()). */
 #define CONTACT_COL (5 + NWORK)
 
-/* Ends an output row: the impulses summed since the last row into impulse (ND values) and
- * the contact statistics into columns CONTACT_COL .. CONTACT_COL + 3 of stats (each may be
- * NULL), then clears them. */
+/* Contact k among those whose impulse sums ws->Pacc are not zero since the last row (ws->ksum). */
+static void impulse_summed(workspace *ws, int k) {
+  if (!ws->psum[k]) {
+    ws->psum[k] = 1;
+    ws->ksum[ws->nsum++] = k;
+  }
+}
+
+/* Ends an output row: the impulses summed since the last row into impulse (ND values, zero
+ * where written: only the contacts with a nonzero sum are) and the contact statistics into
+ * columns CONTACT_COL .. CONTACT_COL + 3 of stats (each may be NULL), then clears them. */
 static void contact_row(workspace *ws, casadi_real *impulse, casadi_real *stats) {
-  if (impulse) memcpy(impulse, ws->Pacc, ND * sizeof(casadi_real));
-  memset(ws->Pacc, 0, ND * sizeof(casadi_real));
+  int i;
+  for (i = 0; i < ws->nsum; ++i) {
+    casadi_real *sum = ws->Pacc + ws->ksum[i] * DC;
+    if (impulse) memcpy(impulse + ws->ksum[i] * DC, sum, DC * sizeof(casadi_real));
+    memset(sum, 0, DC * sizeof(casadi_real));
+    ws->psum[ws->ksum[i]] = 0;
+  }
+  ws->nsum = 0;
   if (stats) {
     stats[CONTACT_COL] = (casadi_real) ws->pgs_unconverged;
     stats[CONTACT_COL + 1] = ws->pgs_residual;
@@ -904,7 +920,10 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
   }
   if (*kept) {
     for (c = 0; c < ws->nkon; ++c) {
-      for (r = (k = ws->kon[c]) * DC; r < (k + 1) * DC; ++r) ws->Pacc[r] += P[r];
+      for (r = (k = ws->kon[c]) * DC; r < (k + 1) * DC; ++r) {
+        ws->Pacc[r] += P[r];
+        if (P[r] != 0) impulse_summed(ws, k);
+      }
       if (ws->track_work) impulse_work(ws, W0, moved ? ws->W : W0, 0, k * DC, DC, P + k * DC, v, v_next);
     }
     return STEP_OK;
@@ -1103,6 +1122,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
   }
   for (a = 0; a < nr; ++a) {
     ws->Pacc[rows[a]] += ws->P[a];
+    if (ws->P[a] != 0) impulse_summed(ws, rows[a] / DC);
     ws->F[rows[a]] = ws->P[a] / h;
   }
 #ifdef CONTACT_PAIRS

@@ -225,6 +225,10 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
     return STEP_BAD_INPUT;
   block = malloc(step_work_bytes() + (16 * NQ + NC + 6 * NX + NU + 1) * sizeof(casadi_real));
   if (!block) return STEP_BAD_INPUT;
+#ifdef NCGEN_CONTACTS
+  if (impulse_out) /* zeros once: each row then writes the contacts with an impulse (contact_row()) */
+    memset(impulse_out, 0, (size_t) (n_steps / every) * ND * sizeof(casadi_real));
+#endif
   state = (casadi_real *) (block + layout(&ws, block));
   q = state;
   v = q + NQ;

@@ -44,13 +44,13 @@
  * be below the level L = max(limit, 0) + sk (sk: the largest side radius + 1e-6 m, a skin
  * that keeps pairs_extend()'s usual limits below L): the elements with a side that is not a
  * member, a finite cap or unbounded rates (ws->palw), and the member-member elements whose
- * sides' intervals on one axis (the one along which the centres spread most) overlap: side i
- * spans x_i -/+ (R_i + a_i) with
+ * sides' boxes overlap on every axis: side i spans x_i -/+ (R_i + a_i) on each axis d with
  *   a_i = (2 / kmin) (L / 2 + s R_i + hs lin_i + 3 rho_i (R_i + Rmax)) + dmax / 2,
- *   rho_i = hs rot_i <= kmin / 4 (else the side spans the whole axis),
+ *   rho_i = hs rot_i <= kmin / 4 (else the side spans every axis whole),
  * kmin the least kappa and dmax the largest d_min of those elements, s = PAIR_SLACK, Rmax the
- * largest R.  Every other element gets b_e = L, S_e = 0, which is exact by construction:
- * disjoint intervals give |x_j - x_i| > R_i + R_j + a_i + a_j, so D > a_i + a_j >= dmax >= d_min,
+ * largest R.  Every other element gets b_e = L, S_e = 0, which is exact by construction: its
+ * boxes are disjoint on some axis d, and |x_j - x_i| >= |x_j,d - x_i,d| > R_i + R_j + a_i + a_j
+ * (the distance of the centres is at least that along any one axis), so D > a_i + a_j >= dmax >= d_min,
  * and with rho_i + rho_j <= kmin / 2 and (rho_i + rho_j)(R_i + R_j) <= sum_i rho_i (R_i + Rmax)
  *   kappa D - s (R_i + R_j) - L - hs S_e
  *     >= (kmin - hs (rot_i + rot_j)) D - [L + s (R_i + R_j) + hs (lin_i + lin_j) + 3 (rho_i + rho_j)(R_i + R_j)]
@@ -58,9 +58,18 @@
  * so its true bound exceeds L + hs S_e >= L > limit: it is off as it would be with b_e taken
  * one by one, L is a lower bound of its gaps, and every later decision (a gap against 0, the
  * reach, the push-out's range, all below L or else pairs_extend() takes every b_e one by one)
- * is the same.  The sides are sorted by their intervals' lower ends from the order of the last
- * sweep (insertion: nearly sorted from step to step), so a step costs O(NS log NS + the
- * overlapping pairs) bound computations instead of one per element.  Exactness: the step compares a gap with a threshold
+ * is the same.  The boxes that overlap on every axis are found by a sweep (pairs_sweep_boxes())
+ * along the axis on which the centres spread most, the sides sorted by their boxes' lower ends
+ * there from the order of the last sweep (insertion: nearly sorted from step to step), and the
+ * other axes tested before an element becomes a candidate, so a step costs O(NS + the pairs whose
+ * boxes overlap on that axis) comparisons and O(the pairs whose boxes overlap on every axis) bound
+ * computations instead of one per element.  (Tested on one axis alone, a sparse grid's intervals
+ * overlap by whole columns, about N^1.5 / 2 pairs of N sides, each a bound computed; now each is
+ * a comparison of the other axes.  A uniform grid over the boxes, O(NS + the pairs in
+ * neighbouring cells, keyed by 3 cell numbers; commit 574e40a of branch grid38), measured 1.3-6x
+ * slower than this sweep from 1000 down to 20 sides on a sparse grid and 2.5-3.6x on heaps of
+ * 20-50 sides: benchmarks/issue34_targets.md.)
+ * Exactness: the step compares a gap with a threshold
  * (<= 0: closed; < GAP_REACH h/2 max |U_N|: about to close; < PENETRATION_TOL + twice the
  * deepest: pushed out with the others; g - h/2 W X j <= 0: closed in repeat_step()); an
  * element is skipped only where b_e exceeds the threshold, so its flat gaps (>= b_e) would
@@ -338,40 +347,71 @@ static int int_ascending(const void *a, const void *b) {
   return (x > y) - (x < y);
 }
 
-/* The interval iv = (lo, hi) on axis `axis` of a side (sb: x0 (DC), R, lin, rot) at level L,
- * hs, with the largest radius rmax, kmin and dmax (the header's comment): x -/+ (R + a), the
- * whole axis where rho = hs rot > kmin / 4 or a number is not finite. */
-static void pair_interval(const casadi_real *sb, int axis, casadi_real L, casadi_real hs, casadi_real rmax,
-                          casadi_real kmin, casadi_real dmax, casadi_real *iv) {
-  const casadi_real R = sb[DC], rho = hs * sb[DC + 2];
-  casadi_real w = R + 2 / kmin * (L / 2 + PAIR_SLACK * R + hs * sb[DC + 1] + 3 * rho * (R + rmax)) + dmax / 2;
-  w += 1e-9 * (fabs(sb[axis]) + w); /* round-off of the ends */
-  iv[0] = sb[axis] - w;
-  iv[1] = sb[axis] + w;
-  if (!(rho <= kmin / 4) || !(fabs(iv[0]) < INFINITY) || !(fabs(iv[1]) < INFINITY)) {
-    iv[0] = -INFINITY;
-    iv[1] = INFINITY;
+/* The box of a side (sb: x0 (dim), R, lin, rot) at level L, hs, with the largest radius rmax,
+ * kmin and dmax (the header's comment): per axis d < dim its interval iv[2 d], iv[2 d + 1] =
+ * x_d -/+ (R + a); every axis whole where rho = hs rot > kmin / 4 or a number is not finite. */
+static void pair_box(const casadi_real *sb, int dim, casadi_real L, casadi_real hs, casadi_real rmax,
+                     casadi_real kmin, casadi_real dmax, casadi_real *iv) {
+  const casadi_real R = sb[dim], rho = hs * sb[dim + 2];
+  const casadi_real w = R + 2 / kmin * (L / 2 + PAIR_SLACK * R + hs * sb[dim + 1] + 3 * rho * (R + rmax)) + dmax / 2;
+  int d, whole = !(rho <= kmin / 4);
+  for (d = 0; d < dim; ++d) {
+    const casadi_real wd = w + 1e-9 * (fabs(sb[d]) + w); /* round-off of the ends */
+    iv[2 * d] = sb[d] - wd;
+    iv[2 * d + 1] = sb[d] + wd;
+    whole |= !(fabs(iv[2 * d]) < INFINITY) || !(fabs(iv[2 * d + 1]) < INFINITY);
   }
+  if (whole)
+    for (d = 0; d < dim; ++d) {
+      iv[2 * d] = -INFINITY;
+      iv[2 * d + 1] = INFINITY;
+    }
 }
 
-/* Sorts ord[0..n) by lo = iv[2 ord[i]] (intervals iv: lo, hi per side), by insertion from the
- * order it holds: O(n + the pairs out of order). */
-static void pairs_sort(const casadi_real *iv, int *ord, int n) {
+/* Whether the boxes a and b (2 dim numbers each) overlap on every axis but skip. */
+static int pair_boxes_meet(const casadi_real *a, const casadi_real *b, int dim, int skip) {
+  int d;
+  for (d = 0; d < dim; ++d)
+    if (d != skip && (a[2 * d] > b[2 * d + 1] || b[2 * d] > a[2 * d + 1])) return 0;
+  return 1;
+}
+
+/* The pairs of n boxes (iv: lo, hi per axis, 2 dim per box) that overlap on every axis, each
+ * once, given to found(ctx, a, b); returns their number.  A sweep along axis: ord (the order of
+ * the last call) sorted by lo on that axis, by insertion (O(n + the pairs out of order)), then
+ * each box against those after it whose lo is at most its hi there, the other axes tested
+ * before a pair is given: O(n + the pairs that overlap on that axis) box tests. */
+static long pairs_sweep_boxes(const casadi_real *iv, int dim, int n, int axis, int *ord,
+                              void (*found)(void *, int, int), void *ctx) {
   int i, j;
+  long count = 0;
   for (i = 1; i < n; ++i) {
     const int k = ord[i];
-    for (j = i; j > 0 && iv[2 * ord[j - 1]] > iv[2 * k]; --j) ord[j] = ord[j - 1];
+    for (j = i; j > 0 && iv[2 * dim * ord[j - 1] + 2 * axis] > iv[2 * dim * k + 2 * axis]; --j) ord[j] = ord[j - 1];
     ord[j] = k;
   }
+  for (i = 0; i < n; ++i) {
+    const casadi_real *a = iv + 2 * dim * ord[i], hi = a[2 * axis + 1];
+    for (j = i + 1; j < n && iv[2 * dim * ord[j] + 2 * axis] <= hi; ++j)
+      if (pair_boxes_meet(a, iv + 2 * dim * ord[j], dim, axis)) { /* overlap on axis: lo_a <= lo_b <= hi_a */
+        found(ctx, ord[i], ord[j]);
+        ++count;
+      }
+  }
+  return count;
 }
 
-/* The sides after position at of ord (sorted by lo) whose intervals overlap ord[at]'s into
- * out; returns their number.  Over at = 0 .. n - 1 each overlapping pair comes once. */
-static int pairs_overlaps(const casadi_real *iv, const int *ord, int n, int at, int *out) {
-  const casadi_real hi = iv[2 * ord[at] + 1];
-  int j, m = 0;
-  for (j = at + 1; j < n && iv[2 * ord[j]] <= hi; ++j) out[m++] = ord[j];
-  return m;
+/* The swept elements of sides a and b made candidates (pairs_sweep_boxes()'s found, ctx the workspace). */
+static inline void pairs_meet(void *ctx, int a, int b) {
+  workspace *ws = ctx;
+  const int *ptr = ws->padj, *ent = ws->padj + PAIR_NS + 1, s = a < b ? a : b, t = a + b - s;
+  int lo = ptr[s], hi = ptr[s + 1];
+  while (lo < hi) { /* the first entry of side s whose other side is >= t */
+    const int mid = (lo + hi) / 2;
+    if (ent[2 * mid] < t) lo = mid + 1;
+    else hi = mid;
+  }
+  for (; lo < ptr[s + 1] && ent[2 * lo] == t; ++lo) pair_candidate(ws, ent[2 * lo + 1]);
 }
 
 /* Every element's lower bound and speed bound (ws->plb, ws->pspd) at the last pairs_bounds(),
@@ -380,7 +420,6 @@ static int pairs_overlaps(const casadi_real *iv, const int *ord, int n, int at, 
 static void pairs_sweep(workspace *ws, casadi_real level, casadi_real hs) {
   casadi_real rmax = 0, spread = -1, L;
   int i, k, d, axis = 0;
-  const int *ptr = ws->padj, *ent = ws->padj + PAIR_NS + 1;
   if (ws->nalw < 0) pairs_init(ws);
   for (k = 0; k < PAIR_NS; ++k) rmax = fmax(rmax, ws->psb[(DC + 3) * k + DC]);
   for (d = 0; d < DC && PAIR_NS; ++d) { /* the axis along which the centres spread most */
@@ -398,22 +437,8 @@ static void pairs_sweep(workspace *ws, casadi_real level, casadi_real hs) {
   pairs_uncandidate(ws);
   for (i = 0; i < ws->nalw; ++i) pair_candidate(ws, ws->palw[i]);
   for (k = 0; k < PAIR_NS; ++k)
-    pair_interval(ws->psb + (DC + 3) * k, axis, L, hs, rmax, ws->pkmin, ws->pdmax, ws->pint + 2 * k);
-  pairs_sort(ws->pint, ws->pord, PAIR_NS);
-  for (i = 0; i < PAIR_NS; ++i) {
-    const int a = ws->pord[i], m = pairs_overlaps(ws->pint, ws->pord, PAIR_NS, i, ws->pover);
-    int j;
-    for (j = 0; j < m; ++j) { /* the swept elements of sides a and b */
-      const int b = ws->pover[j], s = a < b ? a : b, t = a + b - s;
-      int lo = ptr[s], hi = ptr[s + 1];
-      while (lo < hi) { /* the first entry of side s whose other side is >= t */
-        const int mid = (lo + hi) / 2;
-        if (ent[2 * mid] < t) lo = mid + 1;
-        else hi = mid;
-      }
-      for (; lo < ptr[s + 1] && ent[2 * lo] == t; ++lo) pair_candidate(ws, ent[2 * lo + 1]);
-    }
-  }
+    pair_box(ws->psb + (DC + 3) * k, DC, L, hs, rmax, ws->pkmin, ws->pdmax, ws->pint + 2 * DC * k);
+  pairs_sweep_boxes(ws->pint, DC, PAIR_NS, axis, ws->pord, pairs_meet, ws);
   ws->plim = L;
 }
 

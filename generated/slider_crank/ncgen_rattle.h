@@ -119,6 +119,9 @@ typedef struct {
                         the elements on (ncgen_contact_pairs.h); the loops over contacts and rows walk them */
   int nkon;
   int *rowbuf;       /* contact_step()'s active rows (ND) */
+  int *ksum;         /* the contacts whose impulse sums ws->Pacc are not zero (nsum of them; ncgen_contact.h) */
+  int *psum;         /* ... per contact 1 if among them, else 0 */
+  int nsum;
 #ifdef CONTACT_SCHUR
   casadi_real *T;    /* A M^-1, NC x NQ, row-major */
   casadi_real *L;    /* Cholesky factor of A M^-1 A^T, NC x NC, column-major */
@@ -148,9 +151,9 @@ typedef struct {
   casadi_real *pbq;  /* the q (NQ) of the last pairs_bounds() */
   int pb_rates;      /* whether it was given rates (1) or not (0); -1: none since layout() */
   int *pon;          /* per element: 0 skipped, 1 evaluated, 2 to be evaluated (ncgen_contact_pairs.h) */
-  casadi_real *pint; /* the sweep (ncgen_contact_pairs.h): per distinct member side its interval (lo, hi) */
-  int *pord;         /* ... the sides by lo, kept from the last sweep (PAIR_NS) */
-  int *pover;        /* ... the sides an interval overlaps (PAIR_NS) */
+  casadi_real *pint; /* the sweep (ncgen_contact_pairs.h): per distinct member side its box (lo, hi per axis: 2 DC) */
+  int *pord;         /* ... the sides by lo on the sweep's axis, kept from the last sweep (PAIR_NS) */
+  int *pover;        /* ... pairs_init()'s scratch (PAIR_NS) */
   int *padj;         /* ... per side the elements it is the first side of: CSR pointers (PAIR_NS + 1), then
                         (other side, element) by other side (2 NE) */
   int *palw;         /* ... the elements always bounded one by one (NE), their number in nalw */
@@ -227,7 +230,7 @@ static size_t layout(workspace *ws, char *block) {
   sizes[16] = 0; /* G, S, X, Z, Y: ws->dyn, by the active rows (contact_reserve()) */
   sizes[18] = 3 * NX * sizeof(casadi_real); /* rhs, solution, saved Newton start */
   sizes[20] = (NK + ND + NK + ND + 1) * sizeof(casadi_int) + /* act, fset (and the factor's row starts), gp */
-              (NK + ND) * sizeof(int); /* kon, rowbuf */
+              (NK + ND + 2 * NK) * sizeof(int); /* kon, rowbuf, ksum, psum */
   sizes[21] = ND * sizeof(casadi_real);
 #ifdef CONTACT_FACTORED
   sizes[22] = (NNZ_V + NNZ_R + N_BETA) * sizeof(casadi_real);
@@ -247,7 +250,7 @@ static size_t layout(workspace *ws, char *block) {
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
 #ifdef CONTACT_PAIRS
-  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 5) + NQ +
+  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (3 * DC + 3) + NQ +
                (size_t) NE * PAIR_SLOT) * sizeof(casadi_real) + (7 * NE + 3 * PAIR_NS + 1) * sizeof(int);
 #endif
 #endif
@@ -293,6 +296,9 @@ static size_t layout(workspace *ws, char *block) {
     ws->gp = ws->fset + ND + NK;
     ws->kon = (int *) (void *) (ws->gp + ND + 1);
     ws->rowbuf = ws->kon + NK;
+    ws->ksum = ws->rowbuf + ND;
+    ws->psum = ws->ksum + NK;
+    ws->nsum = 0;
     ws->nkon = 0;
     ws->fm = -1;
     ws->newton_once = 0;
@@ -310,7 +316,7 @@ static size_t layout(workspace *ws, char *block) {
     ws->pbq = ws->psb + PAIR_NS * (DC + 3);
     ws->pb_rates = -1;
     ws->pint = ws->pbq + NQ;
-    ws->pcache = ws->pint + 2 * PAIR_NS;
+    ws->pcache = ws->pint + 2 * DC * PAIR_NS;
     for (k = 0; k < (size_t) NE; ++k) /* every entry empty */
       ws->pcache[k * PAIR_SLOT] = ws->pcache[k * PAIR_SLOT + 1] =
           ws->pcache[k * PAIR_SLOT + 2 + PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W] = 0;

@@ -312,7 +312,12 @@ static void test_contact_steps(void) {
   int status;
   mu[0] = 0.5, mu[1] = 0;
   restitution[0] = 0, restitution[1] = 0.5;
+  for (k = 0; k < N * ND; ++k) imp[k] = NAN; /* every row written: the contacts without an impulse zero */
   status = run_fixed(q0, vel0, 0, 0, h, N, 1, 0, 0, 0, q, v, 0, 0, stats, &o, &FIXED_RUN(0, 1), &done, &splits, imp);
+  for (k = 0; k < N * ND && isfinite(imp[k]); ++k) continue;
+  CHECK(k == N * ND, "impulse entry %ld not written (%g)", k, imp[k < N * ND ? k : 0]);
+  for (k = 0; (k + 1) * h < 0.99 * sqrt(2 * drop / G_P); ++k) /* mass 2 in flight: no impulse */
+    CHECK(imp[k * ND + 2] == 0 && imp[k * ND + 3] == 0, "impulse %g in flight at row %ld", imp[k * ND + 2], k);
   CHECK(status == STEP_OK && done == N && splits == 0, "status %d, %ld steps, %ld splits", status, done, splits);
   k = (long) (t_slide / h + 0.5) - 1; /* row k: the state at (k + 1) h */
   CHECK(fabs(v[k * NQ] - (v0 - mu[0] * G_P * t_slide)) < 1e-9, "x' = %.12g at t = %g", v[k * NQ], t_slide);
@@ -442,72 +447,97 @@ static void test_broad_phase(void) {
   free(block);
 }
 
-/* The sweep on random scenes (200 seeds, up to 60 sides, spread or crowded, moving and
- * turning, the order kept from one configuration to the next): the pairs it gives are those
- * whose intervals overlap (all pairs tested), and every pair it leaves out has
- * kmin D - s (R_i + R_j) > L + hs S_e and D >= dmax, the element's bound and speed bound
- * (pair_lower()'s formulas for two member spheres) written out here: none within the level
- * is missed. */
+/* pairs_sweep_boxes()'s found: each pair marked once in a table of n x n (ctx), a second report counted wrong. */
+enum { SEEN_NMAX = 100 };
+typedef struct {
+  unsigned char seen[SEEN_NMAX * SEEN_NMAX];
+  int wrong;
+} seen_pairs;
+static void mark_pair(void *ctx, int a, int b) {
+  seen_pairs *f = ctx;
+  f->wrong += a == b || f->seen[a * SEEN_NMAX + b];
+  f->seen[a * SEEN_NMAX + b] = f->seen[b * SEEN_NMAX + a] = 1;
+}
+
+/* The sweep (pair_box(), pairs_sweep_boxes()) on 300 random scenes of up to SEEN_NMAX sides in
+ * 2-D and 3-D, moved three times each (the kept order nearly sorted): spread and dense scenes,
+ * sides whose rotation makes their box whole, a side far out, and sparse
+ * 3-D grids of spheres 0.2 apart where one axis's intervals overlap by whole columns.  Against
+ * every pair's box test (all axes): the same pairs, each once, and no pair whose lower bound is
+ * within the level left off; on the grids fewer pairs than one axis's intervals give. */
 static void test_sweep_random(void) {
-  enum { NMAX = 60 };
-  casadi_real sb[NMAX * (DC + 3)], iv[2 * NMAX];
-  int ord[NMAX], over[NMAX], seed, moves, missed = 0, wrong = 0, swept = 0, near = 0;
+  enum { NMAX = SEEN_NMAX, DMAX = 3 };
+  static seen_pairs f;
+  casadi_real sb[NMAX * (DMAX + 3)], iv[2 * DMAX * NMAX];
+  int ord[NMAX], seed, moves, missed = 0, wrong = 0, found = 0, near = 0, grids = 0;
+  long one_axis = 0, grid_pairs = 0;
   unsigned long long state = 12345;
 #define RAND01() ((state = state * 6364136223846793005ULL + 1442695040888963407ULL), (double) (state >> 11) / 9007199254740992.0)
-  for (seed = 0; seed < 200; ++seed) {
-    const int n = 2 + (int) (RAND01() * (NMAX - 1)), axis = (int) (RAND01() * DC);
+  for (seed = 0; seed < 300; ++seed) {
+    const int grid = seed % 3 == 0, dim = grid || RAND01() < 0.5 ? 3 : 2, st = dim + 3, axis = (int) (RAND01() * dim);
+    const int n = grid ? 27 + (int) (RAND01() * (NMAX - 26)) : 2 + (int) (RAND01() * (NMAX - 1));
+    const int side = (int) ceil(cbrt((double) n));
     const casadi_real box = RAND01() < 0.3 ? 0.2 : 5.0, hs = RAND01() < 0.5 ? 0 : 0.02 * RAND01();
-    const casadi_real kmin = RAND01() < 0.5 ? 1 : 1 / sqrt(3.0), dmax = RAND01() < 0.5 ? 0 : 1e-3 * RAND01();
+    const casadi_real kmin = grid || RAND01() < 0.5 ? 1 : 1 / sqrt(3.0), dmax = RAND01() < 0.5 ? 0 : 1e-3 * RAND01();
     casadi_real rmax = 0;
     int i, j, k;
     for (k = 0; k < n; ++k) {
-      for (i = 0; i < DC; ++i) sb[(DC + 3) * k + i] = box * RAND01();
-      sb[(DC + 3) * k + DC] = 0.01 + 0.1 * RAND01();
-      sb[(DC + 3) * k + DC + 1] = RAND01() < 0.5 ? 0 : 3 * RAND01();
-      sb[(DC + 3) * k + DC + 2] = RAND01() < 0.7 ? 0 : 20 * RAND01();
+      for (i = 0; i < dim; ++i) /* a grid: side^3 places 0.2 apart, a little off */
+        sb[st * k + i] = grid ? 0.2 * (i == 0 ? k % side : i == 1 ? k / side % side : k / (side * side)) +
+                                    1e-3 * RAND01()
+                              : box * RAND01();
+      sb[st * k + dim] = grid ? 0.03 : 0.01 + 0.1 * RAND01();
+      sb[st * k + dim + 1] = grid || RAND01() < 0.5 ? 0 : 3 * RAND01();
+      sb[st * k + dim + 2] = grid || RAND01() < 0.7 ? 0 : 20 * RAND01();
       ord[k] = n - 1 - k; /* reversed: the worst order to start from */
     }
+    if (!grid && RAND01() < 0.2) sb[0] = 1e20; /* more than 1e15 cells out */
     for (moves = 0; moves < 3; ++moves) {
       const casadi_real L = 0.05 * RAND01() + 0.03;
-      int found[NMAX * NMAX] = {0};
+      long n_found;
+      memset(&f, 0, sizeof f);
       rmax = 0;
       for (k = 0; k < n; ++k) { /* a small move: the kept order is nearly sorted */
         if (moves)
-          for (i = 0; i < DC; ++i) sb[(DC + 3) * k + i] += 0.01 * (RAND01() - 0.5);
-        rmax = fmax(rmax, sb[(DC + 3) * k + DC]);
+          for (i = 0; i < dim; ++i) sb[st * k + i] += 0.01 * (RAND01() - 0.5);
+        rmax = fmax(rmax, sb[st * k + dim]);
       }
-      for (k = 0; k < n; ++k) pair_interval(sb + (DC + 3) * k, axis, L, hs, rmax, kmin, dmax, iv + 2 * k);
-      pairs_sort(iv, ord, n);
-      for (k = 1; k < n; ++k) wrong += iv[2 * ord[k - 1]] > iv[2 * ord[k]];
-      for (k = 0; k < n; ++k) {
-        const int m = pairs_overlaps(iv, ord, n, k, over);
-        for (j = 0; j < m; ++j) {
-          const int a = ord[k], b = over[j];
-          wrong += found[a * NMAX + b] || found[b * NMAX + a]; /* each pair once */
-          found[a * NMAX + b] = found[b * NMAX + a] = 1;
-          ++swept;
-        }
-      }
+      for (k = 0; k < n; ++k) pair_box(sb + st * k, dim, L, hs, rmax, kmin, dmax, iv + 2 * dim * k);
+      n_found = pairs_sweep_boxes(iv, dim, n, axis, ord, mark_pair, &f);
+      for (k = 1; k < n; ++k) wrong += iv[2 * dim * ord[k - 1] + 2 * axis] > iv[2 * dim * ord[k] + 2 * axis];
+      wrong += f.wrong;
+      found += (int) n_found;
       for (i = 0; i < n; ++i)
         for (j = i + 1; j < n; ++j) {
-          const casadi_real *x = sb + (DC + 3) * i, *y = sb + (DC + 3) * j;
-          const int overlap = !(iv[2 * i] > iv[2 * j + 1] || iv[2 * j] > iv[2 * i + 1]);
+          const casadi_real *x = sb + st * i, *y = sb + st * j;
+          const int overlap = pair_boxes_meet(iv + 2 * dim * i, iv + 2 * dim * j, dim, -1);
           casadi_real d2 = 0, D, S, lb;
-          int c;
-          for (c = 0; c < DC; ++c) d2 += (y[c] - x[c]) * (y[c] - x[c]);
-          D = sqrt(d2) - x[DC] - y[DC];
-          S = x[DC + 1] + y[DC + 1] + (x[DC + 2] + y[DC + 2]) * (D + 3 * (x[DC] + y[DC]));
-          lb = kmin * D - PAIR_SLACK * (x[DC] + y[DC]);
-          wrong += overlap != found[i * NMAX + j]; /* the sweep = all pairs' interval test */
-          if (!found[i * NMAX + j] && !(lb > L + hs * S && D >= dmax)) ++missed;
+          int c, o = 1;
+          for (c = 0; c < dim; ++c) d2 += (y[c] - x[c]) * (y[c] - x[c]);
+          D = sqrt(d2) - x[dim] - y[dim];
+          S = x[dim + 1] + y[dim + 1] + (x[dim + 2] + y[dim + 2]) * (D + 3 * (x[dim] + y[dim]));
+          lb = kmin * D - PAIR_SLACK * (x[dim] + y[dim]);
+          for (c = 0; c < dim; ++c) /* the boxes by hand, every axis */
+            o &= !(iv[2 * dim * i + 2 * c] > iv[2 * dim * j + 2 * c + 1] ||
+                   iv[2 * dim * j + 2 * c] > iv[2 * dim * i + 2 * c + 1]);
+          wrong += overlap != o || overlap != f.seen[i * NMAX + j]; /* the sweep = all pairs' box test */
+          if (!f.seen[i * NMAX + j] && !(lb > L + hs * S && D >= dmax)) ++missed;
           near += lb <= L + hs * S;
+          if (grid) { /* the sweep's axis alone */
+            one_axis += !(iv[2 * dim * i + 2 * axis] > iv[2 * dim * j + 2 * axis + 1] ||
+                          iv[2 * dim * j + 2 * axis] > iv[2 * dim * i + 2 * axis + 1]);
+            grid_pairs += overlap;
+          }
         }
+      grids += grid;
     }
   }
 #undef RAND01
-  CHECK(wrong == 0 && missed == 0, "sweep: %d pairs differ from all pairs' test, %d within the level missed", wrong,
+  CHECK(wrong == 0 && missed == 0, "sweep: %d pairs differ from all pairs' box test, %d within the level missed", wrong,
         missed);
-  CHECK(near > 100 && swept > near, "the scenes have near pairs (%d) and the sweep found them (%d)", near, swept);
+  CHECK(near > 100 && found > near, "the scenes have near pairs (%d) and the sweep found them (%d)", near, found);
+  CHECK(grids > 100 && 4 * grid_pairs < one_axis, "sparse grids: %ld pairs overlap on every axis, %ld on one", grid_pairs,
+        one_axis);
 }
 
 /* The elements' last results (pair_eval()): the rows again at the same coordinates without a
