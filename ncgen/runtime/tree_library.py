@@ -9,7 +9,7 @@ install .`` compiles every unit into the package (:mod:`ncgen.runtime.installed_
 
 Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA, the joint
 loop), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with the rate kernels of the spherical
-and free joints (the other kinds have q̇ = w), loops at :data:`UNIT_CFLAGS` (-O1, the forward unit -O2, the inverse unit -O3); the kernel units
+and free joints (the other kinds have q̇ = w), loops at :data:`UNIT_CFLAGS` (-O1, the inverse unit -O3); the kernel units
 ``local_<kind>``, ``edge_<kind>`` and ``body``, whose kernels :class:`TreeLibrary` sets in an
 algorithm unit (``set_kernel``) for the kinds of the trees it serves.  One library of
 everything took 30 s of CPU to compile (18 s of it the kernels
@@ -163,12 +163,13 @@ ROW = 5
 #: Flags of the algorithm units' loops (``-O1``: …; the inverse unit's RNEA and CRBA at ``-O3``: the
 #: batched and single-state RNEA run 20–25 % faster than at -O1 — Talos 4.9 → 3.8 µs, UR10 0.79 → 0.56
 #: µs a state, a C harness, 5 interleaved rounds, AMD EPYC at load 16 — for 0.7 s more of gcc, once;
-#: the forward unit's ABA and joint loop at ``-O2``: ABA instructions a state by callgrind
-#: (benchmarks/tree_tables_callgrind.py) xArm7 12.8 k → 11.9 k, Talos 73.1 k → 68.2 k, for 0.2 s
-#: more of gcc (1.3 → 1.5 s CPU, load 5–8; -O3: 11.9 k, 64.7 k for 3.1 s);
+#: the forward unit stays at ``-O1``: at -O2 its ABA takes 7 % fewer instructions a state (callgrind,
+#: benchmarks/tree_tables_callgrind.py: xArm7 12.8 k → 11.9 k, Talos 73.1 k → 68.2 k) but its gcc
+#: 1.8× the wall time (2.6 → 4.7 s beside the slow test tier), paid by the first ``ncgen simulate``
+#: of a robot from a checkout (issue 34's ≤ 3 s), and the ABA's door is within Pinocchio's time at -O1;
 #: bit-identical results: no flag reorders floating-point arithmetic); the kernel units take the
 #: compile cache's defaults.
-UNIT_CFLAGS = {"forward": "-O2", "inverse": "-O3", "derivatives": "-O1"}
+UNIT_CFLAGS = {"forward": "-O1", "inverse": "-O3", "derivatives": "-O1"}
 
 
 def index_prefix(unit: str) -> str:
