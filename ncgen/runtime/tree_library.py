@@ -165,8 +165,8 @@ ROW = 5
 #: µs a state, a C harness, 5 interleaved rounds, AMD EPYC at load 16 — for 0.7 s more of gcc, once;
 #: the forward unit stays at ``-O1``: at -O2 its ABA takes 7 % fewer instructions a state (callgrind,
 #: benchmarks/tree_tables_callgrind.py: xArm7 12.8 k → 11.9 k, Talos 73.1 k → 68.2 k) but its gcc
-#: 1.8× the wall time (2.6 → 4.7 s beside the slow test tier), paid by the first ``ncgen simulate``
-#: of a robot from a checkout (issue 34's ≤ 3 s), and the ABA's door is within Pinocchio's time at -O1;
+#: takes 2.0–2.2 s of CPU against 1.2–1.4 s (quiet machine), paid by the first ``ncgen simulate`` of
+#: a robot from a checkout (issue 34's ≤ 3 s), and the ABA's door is within Pinocchio's time at -O1;
 #: bit-identical results: no flag reorders floating-point arithmetic); the kernel units take the
 #: compile cache's defaults.
 UNIT_CFLAGS = {"forward": "-O1", "inverse": "-O3", "derivatives": "-O1"}
