@@ -66,6 +66,7 @@ from ncgen.codegen.render import shipped_templates_dir
 from ncgen.codegen.tree_kernels import (ALGORITHM_UNITS, JOINT_KINDS, PACKAGE, SOURCES, kernel_units, kind_names,
                                         units_of, write_tree_unit)
 from ncgen.codegen.tree_tables import TreeTables
+from ncgen.environment import getenv
 from ncgen.errors import CodegenError, ModelError
 from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.table_library import cached_library, compiler_path, library_ready
@@ -346,7 +347,7 @@ _LOADED: dict[tuple[str | None, str | None], TreeLibrary] = {}
 def library_key(cflags: str | None = None) -> tuple[str | None, str | None]:
     """``(cflags, $NCGEN_CFLAGS)``: what the units a :class:`TreeLibrary` loads are compiled with
     (:func:`unit_cflags`), so that a unit built under other flags is never reused."""
-    return cflags, os.environ.get("NCGEN_CFLAGS")
+    return cflags, getenv("NCGEN_CFLAGS")
 
 
 def load_tree_library(cflags: str | None = None) -> TreeLibrary:
