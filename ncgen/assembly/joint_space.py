@@ -41,6 +41,14 @@ from ncgen.validation import MAX_MAGNITUDE, as_vector
 #: of a state whose joint coordinates :meth:`JointSpace.to_joint_space` returns: loose enough
 #: for any integrator's drift, far below a state that is not on the constraints at all.
 OFF_MANIFOLD_TOL = 1e-4
+#: Largest distance (relative to the size of q, as :data:`~ncgen.assembly.manifold.NEWTON_TOL`
+#: is to its square) of a start's q from the tree's natural coordinates at its joint positions
+#: that the tree library's start check accepts; its rates within ``TREE_V_TOL (1 + |v|∞)``.
+#: The residuals (quadratic in q) grow by about ``2 |q|`` per unit of distance, so these are
+#: :func:`_holding`'s tolerances in the coordinates' own units: the two decide alike but within
+#: a small factor of their limits.  Round-off of the check on the Panda: 4e-14 and 2e-13.
+TREE_Q_TOL = 1e-13
+TREE_V_TOL = 1e-11
 #: Starts that passed a joint run's start check kept per model (``JointSpace._checked_state``, ~1 µs
 #: where the check costs ~30 µs on the Panda):
 #: runs from one start (sweeps of tolerances, inputs, horizons) check it once.
@@ -249,10 +257,13 @@ class JointSpace:
         included) to round-off; one call of :func:`~ncgen.assembly.derived.state_check_function`."""
         return _holding(buffered(model, "state_check", lambda: state_check_function(model)).call(t, q, v, p)[0])
 
-    def _checked_state(self, model, q, v, t, p) -> tuple[np.ndarray, np.ndarray] | None:
+    def _checked_state(self, model, q, v, t, p, tree=None) -> tuple[np.ndarray, np.ndarray] | None:
         """``(q_j, v_j)`` of ``(q, v)`` (as :meth:`state`) when it holds as :meth:`_holds`
         decides, else None: both in one call (a run's start in joint space; common
-        subexpressions merged: 14 % fewer instructions on the Panda).  ``q``, ``v``, ``p``:
+        subexpressions merged: 14 % fewer instructions on the Panda).  A tree whose joint run
+        is on the tree library is checked first by its C (``tree``: a
+        :class:`~ncgen.runtime.tree_library.TreeStart` or None, :func:`_tree_holding`, nothing
+        compiled); a start it does not accept goes to the call above, which decides.  ``q``, ``v``, ``p``:
         float64 arrays.  A start that held is kept by its bytes (up to :data:`KEPT_STARTS`,
         then forgotten all at once): the same start again is answered from them, as the call
         would."""
@@ -261,6 +272,10 @@ class JointSpace:
         hit = starts.get(key)
         if hit is not None:
             return hit[0].copy(), hit[1].copy()
+        if tree is not None:
+            check, qj, vj = tree(q, v)
+            if _tree_holding(check):
+                return _kept(starts, key, qj, vj)
 
         def make():
             f = state_check_function(model)
@@ -271,10 +286,7 @@ class JointSpace:
         check, qj, vj = buffered(model, "start_check", make).call(t, q, v, p)
         if not _holding(check):
             return None
-        if len(starts) >= KEPT_STARTS:
-            starts.clear()
-        starts[key] = (qj.copy(), vj.copy())
-        return qj, vj
+        return _kept(starts, key, qj, vj)
 
     def initial_state(self, model, positions: dict, rates: dict):
         """``(q, v)`` of a joint-space initial state: the named joints' positions and rates,
@@ -481,6 +493,26 @@ def joint_position_rates(kind: str, dim: int, nq: int, x, w):
     if kind == "Free":
         return ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2])
     return w
+
+
+def _kept(starts: dict, key, qj: np.ndarray, vj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(qj, vj)``, a copy kept in ``starts`` under ``key`` (up to :data:`KEPT_STARTS`, then
+    all forgotten at once)."""
+    if len(starts) >= KEPT_STARTS:
+        starts.clear()
+    starts[key] = (qj.copy(), vj.copy())
+    return qj, vj
+
+
+def _tree_holding(check: np.ndarray) -> bool:
+    """Whether the tree library's start check (``check = [max |q − q(q_j)|, max |v − v(q_j,
+    v_j)|, |q|∞, |v|∞, s]``) accepts: finite, magnitudes at most
+    :data:`~ncgen.validation.MAX_MAGNITUDE`, ``q`` within :data:`TREE_Q_TOL` (relative to its
+    size) and ``v`` within :data:`TREE_V_TOL` ``(1 + |v|∞)`` of the tree's coordinates at its
+    joint state."""
+    e_q, e_v, q_max, v_max, probe = check.tolist()
+    return (math.isfinite(probe) and q_max <= MAX_MAGNITUDE and v_max <= MAX_MAGNITUDE
+            and e_q <= TREE_Q_TOL * max(1.0, q_max) and e_v <= TREE_V_TOL * (1.0 + v_max))
 
 
 def _holding(check: np.ndarray) -> bool:

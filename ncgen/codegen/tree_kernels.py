@@ -203,11 +203,12 @@ def joint_numbers(a1, b1, a2, b2, axes) -> np.ndarray:
 #: Name of the package (and prefix of every C symbol) of the tree library.
 PACKAGE = "ncgen_trees"
 #: The template files the library is made of besides this module (its cache key hashes them).
-SOURCES = ("runtime/ncgen_tree_tables.h", "runtime/ncgen_spatial.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h")
+SOURCES = ("runtime/ncgen_tree_tables.h", "runtime/ncgen_spatial.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h",
+           "runtime/ncgen_tree_start.h")
 #: The algorithm units of the tree library and their entry points (besides ``work_size``,
 #: ``check``, ``kind_names``, ``set_kernel``); each unit also holds the rate kernels
 #: (:func:`rate_kernel_kinds`).
-ALGORITHM_UNITS = {"inverse": ("rnea", "crba", "rnea_rows"), "forward": ("aba", "joint_run"),
+ALGORITHM_UNITS = {"inverse": ("rnea", "crba", "rnea_rows"), "forward": ("aba", "joint_run", "start_state"),
                    "derivatives": ("rnea_derivatives", "aba_derivatives")}
 #: Doubles of work each kernel may take in the units (the kernels are checked against it).
 KERNEL_WORK = 1024
@@ -265,6 +266,7 @@ def _write(name: str, fns, out_dir, context: dict | None, summary: str):
         ExtraSource("runtime/ncgen_tree_tables.h", "ncgen_tree_tables.h", included=True),
         ExtraSource("runtime/ncgen_spatial.h", "ncgen_spatial.h", included=True),
         ExtraSource("runtime/ncgen_joint_loop.h", "ncgen_joint_loop.h", included=True),
+        ExtraSource("runtime/ncgen_tree_start.h", "ncgen_tree_start.h", included=True),
         ExtraSource("tree_tables.c.j2", "tree_tables.c", context)]
     return write_package(name, fns, out_dir, doc=PackageDoc(summary=summary), max_file_instructions=None,
                          reroll_instructions=None, extra_sources=extra)

@@ -10,7 +10,8 @@ the rate it copies, its factor and its independent column; per position the posi
 copies, factor and offset).  For the local recursion (RNEA, CRBA, ABA) each body also has its
 frame ``f_b`` (the joint frame after the joint's motion, turned so that a revolute or prismatic
 joint's axis is z: :func:`axis_frame`), the constant pose ``xin`` of the joint frame before
-the motion in the parent's ``f_p`` (``R`` column-major, ``p``), and its rigid-body inertia
+the motion in the parent's ``f_p`` (``R`` column-major, ``p``), the member frame in ``f_b``
+(``member``, the same 12 numbers: the start check's, :mod:`ncgen.codegen.tree_start`), and its rigid-body inertia
 about ``f_b``'s origin in ``f_b`` axes, ``inertia = [m; h = m c; I_o]`` (kg, kg·m, kg·m²,
 ``I_o`` column-major).  :class:`UnsupportedTree` names what the tables do not cover:
 passive forces other than a uniform gravity (springs, dampers, joint friction), a joint
@@ -97,7 +98,7 @@ def tree_tables(model) -> TreeTables:
     data = model_data(model)
     if data.tree_tables is None:
         try:
-            data.tree_tables = (derived_data(model, "tree-tables", lambda: _pack(model)), None)
+            data.tree_tables = (derived_data(model, "tree-tables-2", lambda: _pack(model)), None)
         except UnsupportedTree as e:
             data.tree_tables = (None, e)
     tables, error = data.tree_tables
@@ -142,7 +143,7 @@ def _pack(model) -> TreeTables:
               "num_ptr": i32(b.num_ptr), "num": f64(b.num), "body": f64(b.body), "gravity": f64(g),
               "rate_src": i32(rate_src), "rate_col": i32(rate_col), "rate_coef": f64(rate_coef),
               "q_src": i32(q_src), "q_coef": f64(q_coef), "q_off": f64(q_off),
-              "xin": f64(b.xin), "inertia": f64(b.inertia)}
+              "xin": f64(b.xin), "inertia": f64(b.inertia), "member": f64(b.member)}
     return TreeTables(model.name, js.nq, js.nv, len(mimic.independent), arrays)
 
 
@@ -156,7 +157,7 @@ class _Bodies:
         self.js, self.reasons = js, reasons
         self.index = {"ground": -1}
         self.parent, self.kind, self.q_at, self.v_at, self.num_ptr, self.num = [], [], [], [], [0], []
-        self.body, self.xin, self.inertia = [], [], []
+        self.body, self.xin, self.inertia, self.member = [], [], [], []
         self.to_member = {"ground": (np.eye(3), np.zeros(3))}      # member frame c in f_b
         self.sq, self.sv = js.slices(), js.slices(rates=True)
 
@@ -182,6 +183,7 @@ class _Bodies:
         Q = self._axis_frame(e, k)
         H_in = _compose(_compose(self.to_member[here], (a1, b1)), (Q, np.zeros(3)))
         self.to_member[there] = (Q.T @ a2, Q.T @ b2)
+        self.member.extend([*self.to_member[there][0].reshape(-1, order="F"), *self.to_member[there][1]])
         self.xin.extend([*H_in[0].reshape(-1, order="F"), *H_in[1]])
         try:
             m, c, I_c = member_inertia(js, there)

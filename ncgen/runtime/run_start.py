@@ -8,6 +8,7 @@ from ncgen.assembly.initial_state import consistent_state
 from ncgen.errors import ModelError, SimulationError
 from ncgen.runtime.diagnose import explain
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
+from ncgen.runtime.tree_library import loaded_tree_start
 from ncgen.validation import as_vector
 
 
@@ -52,7 +53,7 @@ def start_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None
     if at_model and _plain(q0, model.nq) and _plain(v0, model.nq):
         q, v = (model.q0 if q0 is None else q0), (model.v0 if v0 is None else v0)
         if joint:                           # finite, in range, consistent, and its joint state: one C call
-            state = js._checked_state(model, q, v, t0, p)
+            state = js._checked_state(model, q, v, t0, p, loaded_tree_start(model))
             if state is not None:
                 return q.copy(), v.copy(), state
         elif js._holds(model, q, v, t0, p):  # finite, in range, consistent: one C call

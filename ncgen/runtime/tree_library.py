@@ -105,6 +105,10 @@ SIGNATURES = {
     "aba_derivatives": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "tau"),
                                                    *(("double *", x) for x in ("a", "dq", "dv", "Minv", "check",
                                                                                "w")))),
+    "start_state": c_binding.Signature("int", ((_T, "T"), ("const int *", "idx"), ("const int *", "nz_ptr"),
+                                               ("const int *", "nz"), (_D, "num"), ("int", "n"), (_D, "q"),
+                                               (_D, "v"), ("double *", "qj"), ("double *", "vj"),
+                                               ("double *", "check"), ("double *", "w"))),
     "joint_run": c_binding.Signature("int", (
         (_T, "T"), (_D, "E"), ("int", "nu"), ("const ncgen_joint_options *", "options"), ("int", "n_out"),
         (_D, "t_out"), ("double *", "X"), (_D, "W"), (_D, "S"), ("int", "nquat"), ("const int *", "quat"),
@@ -671,3 +675,71 @@ class TableJointLoop:
             X[0], stats[...] = start                    # the same run again from its start, with the fallback
             status, interrupted = call_interruptibly(*args, stop=options.stop.contents)
         return INTERRUPTED if interrupted else int(status), int(done.value)
+
+
+class TreeStart:
+    """``start(q, v) -> (check, qj, vj)``: the tree library's start check of one model
+    (``ncgen_tree_start.h``: ``check = [max |q − q(q_j)|, max |v − v(q_j, v_j)|, |q|∞, |v|∞, s]``,
+    ``s`` finite only if every value is) on its tables and members' coordinate maps
+    (:func:`~ncgen.codegen.tree_start.start_tables`); the forward unit's, so a model whose
+    joint run is on the tables has it loaded.  Calls from threads take turns (one work array)."""
+
+    def __init__(self, model):
+        from ncgen.codegen.tree_start import start_tables
+
+        self._tables = start_tables(model)
+        self.tree = bound_tree(model)
+        self._fn = self.tree.unit("forward").fn["start_state"]
+        nq, nv = self.tree.tables.nq, self.tree.tables.nv
+        self._out = np.empty(5 + nq + nv)               # [check; qj; vj], its addresses taken once
+        self._w = np.empty(48 * self.tree.tables.nb)
+        a = self._out.ctypes.data
+        self._const = (self.tree.ref, *(x.ctypes.data for x in self._tables), model.nq, a + 40, a + 8 * (5 + nq), a,
+                       self._w.ctypes.data)
+        self._cut = 5 + nq
+        self._lock = threading.Lock()
+
+    def __call__(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(check, qj, vj)`` (new arrays) at the float64 arrays ``q``, ``v`` (``nq`` each)."""
+        T, idx, nz_ptr, nz, num, n, qj, vj, check, w = self._const
+        q = q if q.flags.c_contiguous else np.ascontiguousarray(q)
+        v = v if v.flags.c_contiguous else np.ascontiguousarray(v)
+        with self._lock:
+            if self._fn(T, idx, nz_ptr, nz, num, n, c_binding.address(q), c_binding.address(v), qj, vj, check, w):
+                raise CodegenError("start_state: the tree has a joint the start check does not take")
+            out = self._out.copy()
+        return out[:5], out[5:self._cut], out[self._cut:]
+
+
+def loaded_tree_start(model) -> TreeStart | None:
+    """``model``'s :class:`TreeStart` where its tables' forward unit is loaded already (a joint
+    run on the tables loaded it: nothing is compiled here), else None (also for a tree the
+    check does not cover, remembered per model)."""
+    from ncgen.codegen.tree_tables import UnsupportedTree
+    from ncgen.model.data import model_data
+
+    data, key = model_data(model), library_key()
+    k = data.table_algorithms.get(("start", key), False)
+    if k is not False:
+        return k
+    tree = data.table_algorithms.get((None, key))
+    if tree is None or "forward" not in tree._checked:
+        return None
+    try:
+        return tree_start(model)
+    except UnsupportedTree:
+        data.table_algorithms[("start", key)] = None
+        return None
+
+
+def tree_start(model) -> TreeStart:
+    """``model``'s :class:`TreeStart`, bound once per model and :func:`library_key` (raises
+    :class:`~ncgen.codegen.tree_tables.UnsupportedTree`, or
+    :class:`~ncgen.errors.CompilerNotFound` with no compiler and no forward unit in the cache)."""
+    from ncgen.model.data import model_data
+
+    data, key = model_data(model), ("start", library_key())
+    k = data.table_algorithms.get(key)
+    if k is None:
+        k = data.table_algorithms[key] = TreeStart(model)
+    return k
