@@ -1,0 +1,186 @@
+"""The tree library's start check (``templates/c/runtime/ncgen_tree_start.h``,
+:class:`ncgen.runtime.tree_library.TreeStart`) against CasADi's (``JointSpace._holds``,
+``JointSpace.state``) and against the tree map ``(q_j, v_j) -> (q, v)`` evaluated by CasADi
+(``JointSpace.tree_function``, an independent route through the joints' relative poses):
+the same verdict on starts on and off both constraint levels, the same joint state to 1e-12,
+the distances it reports equal to those of the tree map, its tolerances where they are, and
+the trees it does not take named and left to CasADi's check."""
+from __future__ import annotations
+
+import importlib.metadata as md
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+import ncgen.runtime.run_start as run_start
+from ncgen.assembly.joint_tree import quaternion_matrix
+from ncgen.assembly.joint_space import TREE_Q_TOL, TREE_V_TOL, _tree_holding
+from ncgen.codegen.compiler import CANDIDATES
+from ncgen.codegen.tree_start import start_tables
+from ncgen.codegen.tree_tables import UnsupportedTree
+from ncgen.runtime.tree_library import bound_tree, loaded_tree_start, tree_start
+
+pytestmark = pytest.mark.skipif(not any(shutil.which(c) for c in CANDIDATES), reason="no C compiler for the tree library")
+
+
+def kinds_tree() -> nc.Model:
+    """Revolute joints about tilted axes, a prismatic and a fixed joint, a rotated body: every
+    kind the start check takes."""
+    s = nc.System("start_kinds", gravity=(0.0, 0.0, -9.81))
+    R = quaternion_matrix(np.array([0.2, -0.4, 0.3, 0.8]) / np.linalg.norm([0.2, -0.4, 0.3, 0.8]))
+    b = [s.add_body(f"b{k}", mass=1.0 + 0.1 * k, inertia=np.diag([0.02, 0.03, 0.04]), position=(0.4 * k + 0.2, 0.05 * k, 0),
+                    rotation=R if k == 2 else np.eye(3)) for k in range(5)]
+    s.add_joint(nc.Revolute(s.ground, b[0], at=(0, 0, 0), axis=(0, 0.6, 0.8), name="hinge"))
+    s.add_joint(nc.Prismatic(b[0], b[1], at=(0.4, 0.05, 0), axis=(1, 0, 0), name="slider"))
+    s.add_joint(nc.Fixed(b[1], b[2], at=(0.8, 0.1, 0), name="weld"))
+    s.add_joint(nc.Revolute(b[2], b[3], at=(1.2, 0.15, 0), axis=(1, 0, 0), name="roll"))
+    s.add_joint(nc.Revolute(b[3], b[4], at=(1.6, 0.2, 0), axis=(0, 1, 0), name="pitch"))
+    return s.build()
+
+
+def robot(name: str) -> nc.Model:
+    rel = {"panda": "panda_description/urdf/panda.urdf", "ur10": "ur_description/urdf/ur10_robot.urdf"}[name]
+    try:
+        path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
+    except (md.PackageNotFoundError, StopIteration, TypeError):
+        pytest.skip("example-robot-data is not installed")
+    text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", open(path).read()))
+    return nc.System.from_urdf(text).build()
+
+
+def on_the_tree(model, rng):
+    js = model.joint_space
+    return model.from_joint_space(rng.uniform(-2.5, 2.5, js.nq), rng.uniform(-3, 3, js.nv))
+
+
+def tree_map_distances(model, q, v, qj, vj):
+    """``(max |q − q(q_j)|, max |v − v(q_j, v_j)|)`` by CasADi's tree map."""
+    qt, vt = model.joint_space.tree_function(model.layout)(qj, vj)
+    return np.abs(q - np.array(qt).ravel()).max(), np.abs(v - np.array(vt).ravel()).max()
+
+
+def states(model, rng):
+    """Starts on the tree and moved off either level, non-finite and huge entries, with whether
+    each holds."""
+    out = []
+    for _ in range(4):
+        q, v = on_the_tree(model, rng)
+        out += [(q, v, True), (q + 1e-6 * rng.standard_normal(model.nq), v, False),
+                (q, v + 1e-6 * rng.standard_normal(model.nq), False)]
+        for bad in (np.nan, np.inf, 1e101):
+            for which in ("q", "v"):
+                x = (q if which == "q" else v).copy()
+                x[rng.integers(model.nq)] = bad
+                out.append((x, v, False) if which == "q" else (q, x, False))
+    return out
+
+
+def assert_equal_to_casadi(model, seed: int):
+    js, ts = model.joint_space, tree_start(model)
+    for q, v, holds in states(model, np.random.default_rng(seed)):
+        check, qj, vj = ts(q, v)
+        assert _tree_holding(check) == holds == js._holds(model, q, v, model.t0, model.p0)
+        if holds:
+            qr, vr = js.state(model, q, v)
+            np.testing.assert_allclose(qj, np.ravel(qr), rtol=0, atol=1e-12)
+            np.testing.assert_allclose(vj, np.ravel(vr), rtol=0, atol=1e-12)
+            e_q, e_v = tree_map_distances(model, q, v, qj, vj)
+            assert abs(check[0] - e_q) <= 1e-14 and abs(check[1] - e_v) <= 1e-13
+            state = js._checked_state(model, q, v, model.t0, model.p0, ts)
+            np.testing.assert_array_equal(state[0], qj)
+        elif np.all(np.isfinite(q)) and np.all(np.isfinite(v)) and np.abs(q).max() < 1e3 and np.abs(v).max() < 1e3:
+            e_q, e_v = tree_map_distances(model, q, v, qj, vj)     # off the tree: the distances are the tree map's
+            assert check[0] == pytest.approx(e_q, rel=1e-9, abs=1e-14)
+            assert check[1] == pytest.approx(e_v, rel=1e-9, abs=1e-13)
+
+
+def test_the_start_check_equals_casadis_on_every_kind_it_takes():
+    """Revolute (tilted axes), prismatic, fixed, a rotated body: verdicts, joint states (1e-12)
+    and the distances to the tree (CasADi's tree map) as CasADi's."""
+    model = kinds_tree()
+    kinds = {int(k) for k in bound_tree(model).tables.arrays["kind"]}
+    assert kinds == {0, 1, 2}                               # fixed, revolute, prismatic
+    assert_equal_to_casadi(model, 59)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["panda", "ur10"])
+def test_the_start_check_equals_casadis_on_robots(name):
+    assert_equal_to_casadi(robot(name), 7)
+
+
+def _moved_to(model, ts, q, v, which: int, ratio: float):
+    """``(q, v)`` moved along a fixed random direction of ``q`` (which 0) or ``v`` (1) so that
+    the check's distance is ``ratio`` times its tolerance (the distance is linear in the move)."""
+    d = np.random.default_rng(3).standard_normal(model.nq)
+    tol = TREE_Q_TOL * max(1.0, np.abs(q).max()) if which == 0 else TREE_V_TOL * (1.0 + np.abs(v).max())
+    h = 1e-8
+    probe = ts(q + h * d, v) if which == 0 else ts(q, v + h * d)
+    step = ratio * tol / probe[0][which] * h
+    return (q + step * d, v) if which == 0 else (q, v + step * d)
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_a_start_just_beyond_the_tolerance_goes_to_casadis_check_and_one_within_is_accepted(which, monkeypatch):
+    """Moved to 0.5 of the tolerance: the C accepts (no CasADi call); to 2×: the C does not,
+    CasADi's check decides (accepts: still within its own tolerance, the joint state its own);
+    far beyond (1e4×): refused by both, and simulate projects it as it did before."""
+    model = kinds_tree()
+    ts = tree_start(model)
+    q, v = on_the_tree(model, np.random.default_rng(1))
+    js = model.joint_space
+    within = _moved_to(model, ts, q, v, which, 0.5)
+    beyond = _moved_to(model, ts, q, v, which, 2.0)
+    far = _moved_to(model, ts, q, v, which, 1e4)
+    assert _tree_holding(ts(*within)[0]) and not _tree_holding(ts(*beyond)[0])
+    assert ts(*within)[0][which] == pytest.approx(0.5 * (TREE_Q_TOL if which == 0 else TREE_V_TOL * (1 + np.abs(v).max())),
+                                                  rel=1e-3)
+    calls = []
+    real = type(js)._holds
+    monkeypatch.setattr(type(js), "_holds", staticmethod(lambda *a: calls.append(1) or real(*a)))
+    assert js._checked_state(model, *within, model.t0, model.p0, ts) is not None
+    state = js._checked_state(model, *beyond, model.t0, model.p0, ts)
+    assert state is not None and js._holds(model, *beyond, model.t0, model.p0)
+    np.testing.assert_allclose(state[0], np.ravel(js.state(model, *beyond)[0]), atol=1e-12)
+    assert js._checked_state(model, *far, model.t0, model.p0, ts) is None
+    assert not js._holds(model, *far, model.t0, model.p0)
+
+
+def test_simulate_takes_the_c_check_after_the_first_run_and_runs_as_from_casadis(monkeypatch):
+    """The first joint run on the tables loads the forward unit; later new starts take the C
+    check (counted) and give the trajectory of CasADi's check (joint states equal to round-off:
+    the trajectories to 1e-12)."""
+    model = kinds_tree()
+    rng = np.random.default_rng(5)
+    run = (lambda q, v: nc.simulate(model, 0.05, 0.01, q0=q, v0=v, method="joint", kernels="tables"))
+    run(*on_the_tree(model, rng))
+    assert loaded_tree_start(model) is not None
+    q, v = on_the_tree(model, rng)
+    calls = []
+    real = loaded_tree_start
+    monkeypatch.setattr(run_start, "loaded_tree_start", lambda m: calls.append(1) or real(m))
+    fast = run(q, v)
+    assert calls == [1]
+    monkeypatch.setattr(run_start, "loaded_tree_start", lambda m: None)
+    slow = run(q, v)
+    for name in ("q", "v", "qj", "vj"):
+        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=0, atol=1e-12)
+
+
+def test_trees_the_check_does_not_take_are_named_and_keep_casadis_check():
+    """Spherical and free joints, mimic joints: refused by name; no TreeStart, and the start
+    check is CasADi's."""
+    s = nc.System("start_uncovered", gravity=(0.0, 0.0, -9.81))
+    b = [s.add_body(f"b{k}", mass=1.0, inertia=np.diag([0.02, 0.03, 0.04]), position=(0.4 * k + 0.2, 0, 0))
+         for k in range(3)]
+    s.add_joint(nc.Free(s.ground, b[0], at=(0.2, 0, 0), rotation=np.eye(3), name="root"))
+    s.add_joint(nc.Spherical(b[0], b[1], at=(0.4, 0, 0), name="ball"))
+    s.add_joint(nc.Revolute(b[0], b[2], at=(0.6, 0, 0), axis=(0, 0, 1), name="f1"))
+    model = s.build()
+    with pytest.raises(UnsupportedTree, match="start check.*joint kind spherical; joint kind free"):
+        start_tables(model)
+    nc.simulate(model, 0.01, 0.01, method="joint", kernels="tables")
+    assert loaded_tree_start(model) is None
