@@ -57,7 +57,7 @@ PROGRAMS = [("test_rattle.c", []), pytest.param("test_contact.c", [], marks=SLOW
             pytest.param("test_table_jacobians.c", ["-DTAB_JAC_ROWS"], marks=SLOW_BUILD),
             pytest.param("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS", "-DTAB_JAC_BLOCK=3"], marks=SLOW_BUILD),
             pytest.param("test_tree_tables.c", [], marks=SLOW_BUILD),
-            ("test_spatial.c", []), ("test_lu_columns.c", []), ("test_condense.c", [])]
+            ("test_spatial.c", []), ("test_lu_columns.c", []), ("test_condense.c", []), ("test_tree_start.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -77,7 +77,7 @@ def sanitizers(tmp_path_factory) -> Path:
                                                           "sparse-qr", "sparse-lu", "table-stepper", "table-contacts",
                                                           "table-jacobians",
                                                           "table-jacobians-columns", "tree-tables", "spatial",
-                                                          "lu-columns", "condense"])
+                                                          "lu-columns", "condense", "tree-start"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),

@@ -23,6 +23,7 @@
 #define NCGEN_TREE_START_H
 
 #include <math.h>
+#include <string.h>
 
 #define NCGEN_TREE_START_NUM 324  /* cst 12, P 156, L 156 */
 
