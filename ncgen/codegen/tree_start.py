@@ -9,8 +9,9 @@ the member's coordinates are points and directions fixed in it,
 
 :func:`start_tables` raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree` naming why the
 check does not cover a tree (the caller keeps CasADi's check): a joint other than revolute,
-prismatic and fixed, mimic joints, a member whose coordinates are not 12 fixed points and
-directions spanning its frame, constraints beyond the tree's own (drives, distances).
+prismatic and fixed, mimic joints, parameters, a member whose coordinates are not 12 fixed
+points and directions spanning its frame, constraints beyond the tree's own (drives, distances).
+The ``num`` rows are ``NCGEN_TREE_START_NUM`` (324) doubles.
 """
 from __future__ import annotations
 
@@ -21,8 +22,6 @@ from ncgen.codegen.tree_kernels import JOINT_KINDS, LOCAL_MODES
 from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
 from ncgen.model.data import model_data
 
-#: Doubles per body of ``num`` (``NCGEN_TREE_START_NUM``).
-START_NUM = 324
 #: Joint kinds the check takes (the tables' modes written out about z).
 START_KINDS = frozenset(LOCAL_MODES)
 
@@ -51,6 +50,8 @@ def _pack(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
                if JOINT_KINDS[k].name not in START_KINDS]
     if np.any(a["q_src"] >= 0) or np.any(a["rate_src"] != np.arange(tables.nv)):
         reasons.append("mimic joints")
+    if model.np:
+        reasons.append("parameters (the tables hold the model's numbers)")
     if model.nq - model.nc != js.nv:
         reasons.append(f"{model.nc} constraints for {model.nq} coordinates and {js.nv} joint rates "
                        "(constraints beyond the tree's own)")
