@@ -692,7 +692,7 @@ class TreeStart:
         self._fn = self.tree.unit("forward").fn["start_state"]
         nq, nv = self.tree.tables.nq, self.tree.tables.nv
         self._out = np.empty(5 + nq + nv)               # [check; qj; vj], its addresses taken once
-        self._w = np.empty(48 * self.tree.tables.nb)
+        self._w = np.empty(24 * self.tree.tables.nb)
         a = self._out.ctypes.data
         self._const = (self.tree.ref, *(x.ctypes.data for x in self._tables), model.nq, a + 40, a + 8 * (5 + nq), a,
                        self._w.ctypes.data)

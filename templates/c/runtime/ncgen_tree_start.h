@@ -15,10 +15,11 @@
  *     from its member's local coordinates q_m,
  *   L (12×13, column-major) [q_m] = L [pose; 1]: the member's local coordinates at a pose of f_b;
  * the nonzeros of P's and L's linear parts at nz[nz_ptr[2 b] ..], nz[nz_ptr[2 b + 1] ..] (r | k << 4).
- * The joint frames chain as f_b = f_parent · xin_b · T_J(q_j) (ncgen_tree_local_poses).
+ * The joint frames chain as f_b = f_parent · xin_b · T_J(q_j) (ncgen_tree_local_poses); each joint is read
+ * off its member's pose relative to its parent's frame forward (on the tree, the same frame).
  * A revolute joint's angle is atan2 of the relative rotation's (1,0), (0,0) entries, its rate the z
  * component of Rᵀ Ṙ (its skew part); a prismatic joint's displacement is the relative position's z, its rate that's.
- * Work w: 48 nb doubles.  Returns 0, or 1 when a body's joint is of a kind this check does not take. */
+ * Work w: 24 nb doubles.  Returns 0, or 1 when a body's joint is of a kind this check does not take. */
 #ifndef NCGEN_TREE_START_H
 #define NCGEN_TREE_START_H
 
@@ -59,72 +60,64 @@ static void ncgen_start_apply(const double *M, const int *nz, int m, const doubl
   }
 }
 
-/* (θ or s, its rate) of the relative motion of f_b from A = f_parent · xin (pose H, rate dH of f_b). */
-static void ncgen_start_extract(int mode, const double *A, const double *dA, const double *H, const double *dH,
-                                double *x, double *w) {
-  double R[9], dR[9], d[3], dd[3];
-  int i, j, k;
-  for (j = 0; j < 3; ++j)
-    for (i = 0; i < 3; ++i) {         /* R = Aᵀ H, dR = dAᵀ H + Aᵀ dH (rotations) */
-      R[i + 3 * j] = dR[i + 3 * j] = 0.0;
-      for (k = 0; k < 3; ++k) {
-        R[i + 3 * j] += A[k + 3 * i] * H[k + 3 * j];
-        dR[i + 3 * j] += dA[k + 3 * i] * H[k + 3 * j] + A[k + 3 * i] * dH[k + 3 * j];
-      }
-    }
+static double ncgen_start_dot(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+/* Body b's joint frame forward, F = A T_J(x) with A = f_parent · xin (rate dF from dA and the rate r of x), after
+ * the joint's position x and rate r are read off the measured pose H (rate dH) of f_b relative to A: a revolute
+ * joint's angle atan2 of (Aᵀ H)'s (1,0), (0,0) entries, its rate the z component of the skew part of Rᵀ Ṙ for
+ * R = Aᵀ H (columns 0, 1 of both needed); a prismatic joint's displacement e_zᵀ Aᵀ (p_H − p_A) and its rate. */
+static void ncgen_start_joint(int mode, const double *A, const double *dA, const double *H, const double *dH,
+                              double *x, double *r, double *F, double *dF) {
+  int i;
+  memcpy(F, A, 12 * sizeof(double));
+  memcpy(dF, dA, 12 * sizeof(double));
   if (mode == 1) {
-    *x = atan2(R[1], R[0]);
-    *w = 0.5 * (R[3] * dR[0] + R[4] * dR[1] + R[5] * dR[2] - R[0] * dR[3] - R[1] * dR[4] - R[2] * dR[5]);
-    return;
+    double r0[3], r1[3], d0[3], d1[3], c, s;
+    for (i = 0; i < 3; ++i) {
+      r0[i] = ncgen_start_dot(A + 3 * i, H), r1[i] = ncgen_start_dot(A + 3 * i, H + 3);
+      d0[i] = ncgen_start_dot(dA + 3 * i, H) + ncgen_start_dot(A + 3 * i, dH);
+      d1[i] = ncgen_start_dot(dA + 3 * i, H + 3) + ncgen_start_dot(A + 3 * i, dH + 3);
+    }
+    *x = atan2(r0[1], r0[0]);
+    *r = 0.5 * (ncgen_start_dot(r1, d0) - ncgen_start_dot(r0, d1));
+    c = cos(*x), s = sin(*x);
+    for (i = 0; i < 3; ++i) {                     /* R = R_A Rz(x), Ṙ = Ṙ_A Rz(x) + r R_A Rz'(x) */
+      F[i] = c * A[i] + s * A[3 + i], F[3 + i] = c * A[3 + i] - s * A[i];
+      dF[i] = c * dA[i] + s * dA[3 + i] + *r * F[3 + i], dF[3 + i] = c * dA[3 + i] - s * dA[i] - *r * F[i];
+    }
+  } else if (mode == 2) {
+    double d[3], dd[3];
+    for (i = 0; i < 3; ++i) d[i] = H[9 + i] - A[9 + i], dd[i] = dH[9 + i] - dA[9 + i];
+    *x = ncgen_start_dot(A + 6, d);
+    *r = ncgen_start_dot(dA + 6, d) + ncgen_start_dot(A + 6, dd);
+    for (i = 0; i < 3; ++i) F[9 + i] += *x * A[6 + i], dF[9 + i] += *r * A[6 + i] + *x * dA[6 + i];
   }
-  for (i = 0; i < 3; ++i) d[i] = H[9 + i] - A[9 + i], dd[i] = dH[9 + i] - dA[9 + i];
-  *x = A[6] * d[0] + A[7] * d[1] + A[8] * d[2];     /* e_zᵀ Aᵀ (p_H − p_A) */
-  *w = dA[6] * d[0] + dA[7] * d[1] + dA[8] * d[2] + A[6] * dd[0] + A[7] * dd[1] + A[8] * dd[2];
 }
 
 static int ncgen_tree_start_state(const ncgen_tree_kinds *K, const ncgen_tree *T, const int *idx, const int *nz_ptr,
                                   const int *nz, const double *num, int n, const double *q, const double *v, double *qj,
                                   double *vj, double *check, double *w) {
   static const double I[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0}, Z[12] = {0};
-  double qm[12], vm[12], A[12], dA[12], J[12], dJ[12], y[12], dy[12];
+  double qm[12], vm[12], H[12], dH[12], A[12], dA[12], y[12], dy[12];
   double e_q = 0.0, e_v = 0.0, q_max = 0.0, v_max = 0.0, sum = 0.0;
   int b, i;
   for (b = 0; b < T->nb; ++b)
     if (!K->joint[T->kind[b]].mode) return 1;
   for (b = 0; b < T->nb; ++b) {
-    const int *ix = idx + 12 * b, m = K->joint[T->kind[b]].mode;
+    const int *ix = idx + 12 * b, m = K->joint[T->kind[b]].mode, par = T->parent[b];
     const double *cst = num + NCGEN_TREE_START_NUM * b, *P = cst + 12, *L = P + 156;
     const int *nzP = nz + nz_ptr[2 * b], *nzL = nz + nz_ptr[2 * b + 1];
     int mP = nz_ptr[2 * b + 1] - nz_ptr[2 * b], mL = nz_ptr[2 * b + 2] - nz_ptr[2 * b + 1];
-    const double *xin = T->xin + 12 * b;
-    int par = T->parent[b];
-    double *Hf = w + 48 * b, *dHf = Hf + 12, *F = Hf + 24, *dF = Hf + 36;       /* measured f_b, forward f_b */
-    const double *Hp = par < 0 ? I : w + 48 * par, *dHp = par < 0 ? Z : Hp + 12;
-    const double *Fp = par < 0 ? I : Hp + 24, *dFp = par < 0 ? Z : Hp + 36;
+    double *F = w + 24 * b, *dF = F + 12, x = 0.0, r = 0.0;                  /* f_b forward and its rate */
+    const double *Fp = par < 0 ? I : w + 24 * par, *dFp = par < 0 ? Z : Fp + 12;
     for (i = 0; i < 12; ++i) qm[i] = ix[i] >= 0 ? q[ix[i]] : cst[i], vm[i] = ix[i] >= 0 ? v[ix[i]] : 0.0;
-    ncgen_start_apply(P, nzP, mP, qm, 1.0, Hf);                                   /* f_b's pose and rate */
-    ncgen_start_apply(P, nzP, mP, vm, 0.0, dHf);
-    ncgen_start_compose(Hp, xin, A);
-    ncgen_start_dcompose(Hp, dHp, xin, Z, dA);
-    memcpy(J, I, sizeof J);
-    memset(dJ, 0, sizeof dJ);
-    if (m == 1 || m == 2) {
-      double x, r;
-      ncgen_start_extract(m, A, dA, Hf, dHf, &x, &r);
-      qj[T->q_at[b]] = x, vj[T->v_at[b]] = r;
-      if (m == 1) {
-        double c = cos(x), s = sin(x);
-        J[0] = c, J[1] = s, J[3] = -s, J[4] = c;
-        dJ[0] = -s * r, dJ[1] = c * r, dJ[3] = -c * r, dJ[4] = -s * r;
-      } else {
-        J[11] = x, dJ[11] = r;
-      }
-    }
-    ncgen_start_compose(Fp, xin, A);                                     /* forward: f_b = f_p xin T_J */
-    ncgen_start_dcompose(Fp, dFp, xin, Z, dA);
-    ncgen_start_compose(A, J, F);
-    ncgen_start_dcompose(A, dA, J, dJ, dF);
-    ncgen_start_apply(L, nzL, mL, F, 1.0, y);                                     /* the member's coordinates */
+    ncgen_start_apply(P, nzP, mP, qm, 1.0, H);                            /* f_b measured and its rate */
+    ncgen_start_apply(P, nzP, mP, vm, 0.0, dH);
+    ncgen_start_compose(Fp, T->xin + 12 * b, A);                          /* A = f_p xin (forward) */
+    ncgen_start_dcompose(Fp, dFp, T->xin + 12 * b, Z, dA);
+    ncgen_start_joint(m, A, dA, H, dH, &x, &r, F, dF);
+    if (m == 1 || m == 2) qj[T->q_at[b]] = x, vj[T->v_at[b]] = r;
+    ncgen_start_apply(L, nzL, mL, F, 1.0, y);                             /* the member's coordinates forward */
     ncgen_start_apply(L, nzL, mL, dF, 0.0, dy);
     for (i = 0; i < 12; ++i) {
       double d = fabs(y[i] - qm[i]), dv = fabs(dy[i] - vm[i]);
