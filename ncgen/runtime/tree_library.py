@@ -690,22 +690,22 @@ class TreeStart:
         self._tables = start_tables(model)
         self.tree = bound_tree(model)
         self._fn = self.tree.unit("forward").fn["start_state"]
-        nq, nv = self.tree.tables.nq, self.tree.tables.nv
-        self._out = np.empty(5 + nq + nv)               # [check; qj; vj], its addresses taken once
+        nq, nv, n = self.tree.tables.nq, self.tree.tables.nv, model.nq
+        self._in, self._out = np.empty(2 * n), np.empty(5 + nq + nv)      # [q; v], [check; qj; vj]: addresses taken once
         self._w = np.empty(24 * self.tree.tables.nb)
-        a = self._out.ctypes.data
-        self._const = (self.tree.ref, *(x.ctypes.data for x in self._tables), model.nq, a + 40, a + 8 * (5 + nq), a,
-                       self._w.ctypes.data)
-        self._cut = 5 + nq
+        a, x = self._out.ctypes.data, self._in.ctypes.data
+        ptr = ctypes.c_void_p                                               # ctypes objects: no conversion per call
+        self._args = (ptr(self.tree.ref), *(ptr(t.ctypes.data) for t in self._tables), ctypes.c_int(n), ptr(x),
+                      ptr(x + 8 * n), ptr(a + 40), ptr(a + 8 * (5 + nq)), ptr(a), ptr(self._w.ctypes.data))
+        self._n, self._cut = n, 5 + nq
         self._lock = threading.Lock()
 
     def __call__(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(check, qj, vj)`` (new arrays) at the float64 arrays ``q``, ``v`` (``nq`` each)."""
-        T, idx, nz_ptr, nz, num, n, qj, vj, check, w = self._const
-        q = q if q.flags.c_contiguous else np.ascontiguousarray(q)
-        v = v if v.flags.c_contiguous else np.ascontiguousarray(v)
+        """``(check, qj, vj)`` (new arrays) at ``q``, ``v`` (``nq`` floats each)."""
+        n = self._n
         with self._lock:
-            if self._fn(T, idx, nz_ptr, nz, num, n, c_binding.address(q), c_binding.address(v), qj, vj, check, w):
+            self._in[:n], self._in[n:] = q, v
+            if self._fn(*self._args):
                 raise CodegenError("start_state: the tree has a joint the start check does not take")
             out = self._out.copy()
         return out[:5], out[5:self._cut], out[self._cut:]

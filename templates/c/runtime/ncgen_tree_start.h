@@ -72,7 +72,7 @@ static void ncgen_start_joint(int mode, const double *A, const double *dA, const
   memcpy(F, A, 12 * sizeof(double));
   memcpy(dF, dA, 12 * sizeof(double));
   if (mode == 1) {
-    double r0[3], r1[3], d0[3], d1[3], c, s;
+    double r0[3], r1[3], d0[3], d1[3], h, c, s;
     for (i = 0; i < 3; ++i) {
       r0[i] = ncgen_start_dot(A + 3 * i, H), r1[i] = ncgen_start_dot(A + 3 * i, H + 3);
       d0[i] = ncgen_start_dot(dA + 3 * i, H) + ncgen_start_dot(A + 3 * i, dH);
@@ -80,7 +80,8 @@ static void ncgen_start_joint(int mode, const double *A, const double *dA, const
     }
     *x = atan2(r0[1], r0[0]);
     *r = 0.5 * (ncgen_start_dot(r1, d0) - ncgen_start_dot(r0, d1));
-    c = cos(*x), s = sin(*x);
+    h = sqrt(r0[0] * r0[0] + r0[1] * r0[1]);      /* cos x, sin x (a NaN where h is 0: the sum shows it) */
+    c = r0[0] / h, s = r0[1] / h;
     for (i = 0; i < 3; ++i) {                     /* R = R_A Rz(x), Ṙ = Ṙ_A Rz(x) + r R_A Rz'(x) */
       F[i] = c * A[i] + s * A[3 + i], F[3 + i] = c * A[3 + i] - s * A[i];
       dF[i] = c * dA[i] + s * dA[3 + i] + *r * F[3 + i], dF[3 + i] = c * dA[3 + i] - s * dA[i] - *r * F[i];
