@@ -49,14 +49,17 @@ static void ncgen_start_dcompose(const double *A, const double *dA, const double
                   + A[i] * dB[9] + A[i + 3] * dB[10] + A[i + 6] * dB[11] + dA[9 + i];
 }
 
-/* y = M [x; c] for a 12×13 column-major M whose linear part has its nonzeros at nz[0 .. m − 1] (row r, column k
- * as r | k << 4), c = 1: with its constant column, 0: the linear part alone. */
-static void ncgen_start_apply(const double *M, const int *nz, int m, const double *x, double c, double *y) {
+/* y = M [x; 1] and dy = M [dx; 0] for a 12×13 column-major M whose linear part has its nonzeros at nz[0 .. m − 1]
+ * (row r, column k as r | k << 4): a pose or coordinates and their rates. */
+static void ncgen_start_apply(const double *M, const int *nz, int m, const double *x, const double *dx, double *y,
+                              double *dy) {
   int i;
-  for (i = 0; i < 12; ++i) y[i] = c * M[i + 144];
+  for (i = 0; i < 12; ++i) y[i] = M[i + 144], dy[i] = 0.0;
   for (i = 0; i < m; ++i) {
     int r = nz[i] & 15, k = nz[i] >> 4;
-    y[r] += M[r + 12 * k] * x[k];
+    double a = M[r + 12 * k];
+    y[r] += a * x[k];
+    dy[r] += a * dx[k];
   }
 }
 
@@ -112,14 +115,12 @@ static int ncgen_tree_start_state(const ncgen_tree_kinds *K, const ncgen_tree *T
     double *F = w + 24 * b, *dF = F + 12, x = 0.0, r = 0.0;                  /* f_b forward and its rate */
     const double *Fp = par < 0 ? I : w + 24 * par, *dFp = par < 0 ? Z : Fp + 12;
     for (i = 0; i < 12; ++i) qm[i] = ix[i] >= 0 ? q[ix[i]] : cst[i], vm[i] = ix[i] >= 0 ? v[ix[i]] : 0.0;
-    ncgen_start_apply(P, nzP, mP, qm, 1.0, H);                            /* f_b measured and its rate */
-    ncgen_start_apply(P, nzP, mP, vm, 0.0, dH);
+    ncgen_start_apply(P, nzP, mP, qm, vm, H, dH);                         /* f_b measured and its rate */
     ncgen_start_compose(Fp, T->xin + 12 * b, A);                          /* A = f_p xin (forward) */
     ncgen_start_dcompose(Fp, dFp, T->xin + 12 * b, Z, dA);
     ncgen_start_joint(m, A, dA, H, dH, &x, &r, F, dF);
     if (m == 1 || m == 2) qj[T->q_at[b]] = x, vj[T->v_at[b]] = r;
-    ncgen_start_apply(L, nzL, mL, F, 1.0, y);                             /* the member's coordinates forward */
-    ncgen_start_apply(L, nzL, mL, dF, 0.0, dy);
+    ncgen_start_apply(L, nzL, mL, F, dF, y, dy);                          /* the member's coordinates forward */
     for (i = 0; i < 12; ++i) {
       double d = fabs(y[i] - qm[i]), dv = fabs(dy[i] - vm[i]);
       e_q = d > e_q ? d : e_q;
