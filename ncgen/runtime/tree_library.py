@@ -105,10 +105,7 @@ SIGNATURES = {
     "aba_derivatives": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "tau"),
                                                    *(("double *", x) for x in ("a", "dq", "dv", "Minv", "check",
                                                                                "w")))),
-    "start_state": c_binding.Signature("int", ((_T, "T"), ("const int *", "idx"), ("const int *", "nz_ptr"),
-                                               ("const int *", "nz"), (_D, "num"), ("int", "n"), (_D, "q"),
-                                               (_D, "v"), ("double *", "qj"), ("double *", "vj"),
-                                               ("double *", "check"), ("double *", "w"))),
+    "start_state": c_binding.Signature("int", (("const ncgen_tree_start *", "S"),)),
     "joint_run": c_binding.Signature("int", (
         (_T, "T"), (_D, "E"), ("int", "nu"), ("const ncgen_joint_options *", "options"), ("int", "n_out"),
         (_D, "t_out"), ("double *", "X"), (_D, "W"), (_D, "S"), ("int", "nquat"), ("const int *", "quat"),
@@ -677,6 +674,13 @@ class TableJointLoop:
         return INTERRUPTED if interrupted else int(status), int(done.value)
 
 
+class _Start(ctypes.Structure):
+    """``ncgen_tree_start``: the arguments of ``start_state``."""
+
+    _fields_ = [*((f, ctypes.c_void_p) for f in ("T", "idx", "nz_ptr", "nz", "num")), ("n", ctypes.c_int),
+                *((f, ctypes.c_void_p) for f in ("q", "v", "qj", "vj", "check", "w"))]
+
+
 class TreeStart:
     """``start(q, v) -> (check, qj, vj)``: the tree library's start check of one model
     (``ncgen_tree_start.h``: ``check = [max |q − q(q_j)|, max |v − v(q_j, v_j)|, |q|∞, |v|∞, s]``,
@@ -694,9 +698,9 @@ class TreeStart:
         self._in, self._out = np.empty(2 * n), np.empty(5 + nq + nv)      # [q; v], [check; qj; vj]: addresses taken once
         self._w = np.empty(24 * self.tree.tables.nb)
         a, x = self._out.ctypes.data, self._in.ctypes.data
-        ptr = ctypes.c_void_p                                               # ctypes objects: no conversion per call
-        self._args = (ptr(self.tree.ref), *(ptr(t.ctypes.data) for t in self._tables), ctypes.c_int(n), ptr(x),
-                      ptr(x + 8 * n), ptr(a + 40), ptr(a + 8 * (5 + nq)), ptr(a), ptr(self._w.ctypes.data))
+        self._struct = _Start(self.tree.ref, *(t.ctypes.data for t in self._tables), n, x, x + 8 * n, a + 40,
+                              a + 8 * (5 + nq), a, self._w.ctypes.data)
+        self._ref = ctypes.addressof(self._struct)
         self._n, self._cut = n, 5 + nq
         self._lock = threading.Lock()
 
@@ -705,7 +709,7 @@ class TreeStart:
         n = self._n
         with self._lock:
             self._in[:n], self._in[n:] = q, v
-            if self._fn(*self._args):
+            if self._fn(self._ref):
                 raise CodegenError("start_state: the tree has a joint the start check does not take")
             out = self._out.copy()
         return out[:5], out[5:self._cut], out[self._cut:]

@@ -43,9 +43,12 @@ int main(void) {
   double num[3 * NCGEN_TREE_START_NUM] = {0}, q[33], v[33], qm[36], qp[36], qn[36], qj[2], vj[2], check[5], w[144];
   const double ths[2] = {0.7, 3.1}, s = -0.35, th_dot = 1.3, s_dot = -0.8, h = 1e-6;
   ncgen_tree T;
+  ncgen_tree_start S;
   memset(&T, 0, sizeof T);
   T.nb = 3, T.nq = 2, T.nv = 2, T.ni = 2, T.parent = parent, T.kind = kind, T.q_at = q_at, T.v_at = v_at;
   T.xin = XIN;
+  S.T = &T, S.idx = idx, S.nz_ptr = nz_ptr, S.nz = nz, S.num = num, S.n = 33, S.q = q, S.v = v;
+  S.qj = qj, S.vj = vj, S.check = check, S.w = w;
   for (b = 0; b < 3; ++b) {
     double *cst = num + NCGEN_TREE_START_NUM * b, *P = cst + 12, *L = P + 156;
     for (i = 0; i < 12; ++i) {
@@ -67,22 +70,22 @@ int main(void) {
       }
       idx[i] = b, q[b] = qm[i], v[b] = (qp[i] - qn[i]) / (2 * h), ++b;
     }
-    CHECK(ncgen_tree_start_state(&K, &T, idx, nz_ptr, nz, num, 33, q, v, qj, vj, check, w) == 0, "status");
+    CHECK(ncgen_tree_start_state(&K, &S) == 0, "status");
     CHECK(fabs(qj[0] - ths[k]) < 1e-14 && fabs(qj[1] - s) < 1e-14, "q_j = (%g, %g)", qj[0], qj[1]);
     CHECK(fabs(vj[0] - th_dot) < 1e-8 && fabs(vj[1] - s_dot) < 1e-8, "v_j = (%g, %g)", vj[0], vj[1]);
     CHECK(check[0] < 1e-14 && check[1] < 1e-8, "distances %g %g on the tree", check[0], check[1]);
     CHECK(isfinite(check[4]) && check[2] > 1.0 && check[3] > 0.1, "magnitudes %g %g", check[2], check[3]);
   }
   q[20] += 1e-7;                                        /* a slot of body 1 moved off the tree */
-  ncgen_tree_start_state(&K, &T, idx, nz_ptr, nz, num, 33, q, v, qj, vj, check, w);
+  ncgen_tree_start_state(&K, &S);
   CHECK(check[0] > 3e-8 && check[0] < 2e-7, "distance %g of a move of 1e-7", check[0]);
   v[5] += 1e-3;
-  ncgen_tree_start_state(&K, &T, idx, nz_ptr, nz, num, 33, q, v, qj, vj, check, w);
+  ncgen_tree_start_state(&K, &S);
   CHECK(check[1] > 3e-4 && check[1] < 2e-3, "rate distance %g of a move of 1e-3", check[1]);
   v[7] = NAN;
-  ncgen_tree_start_state(&K, &T, idx, nz_ptr, nz, num, 33, q, v, qj, vj, check, w);
+  ncgen_tree_start_state(&K, &S);
   CHECK(!isfinite(check[4]), "a NaN in v: the sum %g", check[4]);
   joint[2].mode = 0;                                     /* a kind taken by its kernel: not this check's */
-  CHECK(ncgen_tree_start_state(&K, &T, idx, nz_ptr, nz, num, 33, q, v, qj, vj, check, w) == 1, "kind refused");
+  CHECK(ncgen_tree_start_state(&K, &S) == 1, "kind refused");
   return report("test_tree_start");
 }

@@ -28,6 +28,17 @@
 
 #define NCGEN_TREE_START_NUM 324  /* cst 12, P 156, L 156 */
 
+/* The arguments of ncgen_tree_start_state: the tree, its members' maps, the n natural coordinates q, v, and where
+ * the joint state, the check and the work go (one pointer for a caller that sets them once). */
+typedef struct {
+  const ncgen_tree *T;
+  const int *idx, *nz_ptr, *nz;
+  const double *num;
+  int n;
+  const double *q, *v;
+  double *qj, *vj, *check, *w;
+} ncgen_tree_start;
+
 /* out = A B (poses). */
 static void ncgen_start_compose(const double *A, const double *B, double *out) {
   int i, j;
@@ -98,9 +109,11 @@ static void ncgen_start_joint(int mode, const double *A, const double *dA, const
   }
 }
 
-static int ncgen_tree_start_state(const ncgen_tree_kinds *K, const ncgen_tree *T, const int *idx, const int *nz_ptr,
-                                  const int *nz, const double *num, int n, const double *q, const double *v, double *qj,
-                                  double *vj, double *check, double *w) {
+static int ncgen_tree_start_state(const ncgen_tree_kinds *K, const ncgen_tree_start *S) {
+  const ncgen_tree *T = S->T;
+  const int *idx = S->idx, *nz_ptr = S->nz_ptr, *nz = S->nz, n = S->n;
+  const double *num = S->num, *q = S->q, *v = S->v;
+  double *qj = S->qj, *vj = S->vj, *check = S->check, *w = S->w;
   static const double I[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0}, Z[12] = {0};
   double qm[12], vm[12], H[12], dH[12], A[12], dA[12], y[12], dy[12];
   double e_q = 0.0, e_v = 0.0, q_max = 0.0, v_max = 0.0, sum = 0.0;
