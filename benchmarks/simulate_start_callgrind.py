@@ -1,0 +1,94 @@
+"""Instructions of ``nc.simulate`` from a new start on the Panda (issue 37): the run of
+``simulate_fixed_cost.py`` (one 1 ms output step, DOPRI5 at rtol = atol = 1e-3), ``q0`` moved
+by 1e-3 rad per joint and call, counted by valgrind's callgrind (deterministic, unaffected by
+the load): 20 uncounted calls, then the instrumentation switched on (``callgrind_control -i
+on``) for ``--calls`` calls.  Printed per call: all instructions, and those of the start check
+(CasADi's virtual machine, ``casadi::SXFunction::eval``, or the tree library's C,
+``ncgen_tree_start_state``), for this tree and ``--before DIR``, with ``RATIO`` lines.
+
+    python benchmarks/simulate_start_callgrind.py [--before DIR] [--calls 40] [--smoke]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import machine  # noqa: E402
+
+CHILD = r"""
+import os, re, subprocess, sys, importlib.metadata as md
+import numpy as np
+import ncgen as nc
+
+rel = "panda_description/urdf/panda.urdf"
+path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
+text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", open(path).read()))
+model = nc.System.from_urdf(text).build()
+js = model.joint_space
+calls = int(sys.argv[1])
+starts = [model.from_joint_space(np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k, np.zeros(js.nv)) for k in range(calls + 20)]
+run = lambda q, v: nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3)
+for q, v in starts[calls:]:
+    run(q, v)
+switch = lambda on: subprocess.run(["callgrind_control", "-i", on, str(os.getpid())], check=True, capture_output=True)
+switch("on")
+for q, v in starts[:calls]:
+    run(q, v)
+switch("off")
+"""
+#: The start check's functions: CasADi's virtual machine, the tree library's C.
+START_CHECK = ("casadi::SXFunction::eval", "ncgen_tree_start_state")
+
+
+def counted(tree: Path, calls: int) -> tuple[float, float]:
+    """``(instructions per call, of them the start check's)`` of the child on ``tree``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "callgrind.out"
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}",
+                        sys.executable, "-c", CHILD, str(calls)], env=env, cwd=tree, check=True, capture_output=True)
+        text = subprocess.run(["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(out)],
+                              capture_output=True, text=True, check=True).stdout
+    total = start = 0
+    for row in text.splitlines():
+        m = re.match(r"\s*([\d,]+)\s+\([^)]*\)\s+(.*)", row)
+        if m and "PROGRAM TOTALS" in m.group(2):
+            total = int(m.group(1).replace(",", ""))
+        elif m and any(f":{name}" in m.group(2) for name in START_CHECK):
+            start += int(m.group(1).replace(",", ""))
+    return total / calls, start / calls
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--before", type=Path, help="another ncgen tree to compare with (its root directory)")
+    ap.add_argument("--calls", type=int, default=40)
+    ap.add_argument("--smoke", action="store_true", help="2 calls (CI)")
+    a = ap.parse_args(argv)
+    print(machine())
+    if shutil.which("valgrind") is None or shutil.which("callgrind_control") is None:
+        print("valgrind's callgrind is not installed: nothing counted")
+        return
+    calls = 2 if a.smoke else a.calls
+    trees = {"this tree": ROOT} | ({"before": a.before.resolve()} if a.before else {})
+    print(f"\n=== panda: nc.simulate of one 1 ms output step from a new start, {calls} calls counted")
+    got = {}
+    for name, tree in trees.items():
+        got[name] = counted(tree, calls)
+        print(f"  {name}: {got[name][0]:12,.0f} instructions per call, start check {got[name][1]:10,.0f}")
+    if a.before:
+        for k, label in ((0, "all"), (1, "the start check")):
+            print(f"  RATIO this tree / before, instructions per call, {label}: {got['this tree'][k] / got['before'][k]:.3f}")
+
+
+if __name__ == "__main__":
+    main()
