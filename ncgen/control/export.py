@@ -151,7 +151,7 @@ def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", itera
         from ncgen.control.export_fatrop import fatrop_controller
         fns, own, controller = fatrop_controller(model, problem, name, iterations, fatrop_options)
     else:
-        fns, own = mpc_functions(model, problem, regularization=REGULARIZATION)[1:], []      # C condenses the blocks
+        fns, own = mpc_functions(model, problem, regularization=REGULARIZATION), []      # C condenses the blocks
         controller = controller_context(model, problem, fns, iterations, line_search_rules(model))
     kind = "fatrop" if solver == "fatrop" else "mpc"
     context = {**controller, **_demo_context(model, problem, plant, x0, t_end, substeps, warmup, pl)}
