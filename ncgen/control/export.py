@@ -128,9 +128,6 @@ def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", itera
     model = ocp.model
     name = name or model.name
     _check_options(solver, fatrop_options, iterations, substeps, warmup)
-    if ocp.cable_min_tension is not None:
-        raise NcgenError(f"export_mpc: the problem's min_tension ({ocp.cable_min_tension:g} N, the cables' pull floor) "
-                         "is not exported: the exported controller has no cable rows; use nc.MPC in Python")
     problem = mpc_problem(ocp, terminal_weight)
     nx, nu = 2 * model.nq, model.nu
     t_end = as_scalar(t_end, "export_mpc: t_end")

@@ -267,7 +267,7 @@ class MPC:
     ``loop``: ``"python"`` (the iterations driven from Python, every iteration reported) or
     ``"c"`` (the whole control step one call of the exported package's C controller compiled
     into the same package, :mod:`ncgen.control.mpc_c_loop`: the same numbers; ``qrqp``, no
-    reference, no ``min_tension``; only the last iteration of a step reported).
+    reference; only the last iteration of a step reported).
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
     from ``t``, and iterates on it.
@@ -296,7 +296,7 @@ class MPC:
         self.loop, refusal = check_loop(loop), loop_refusal(solver, qp_solver, self.problem)
         if self.loop == "c" and refusal is not None:
             raise OptimizationError(f"MPC: loop='c': the compiled control step is the exported package's "
-                                    f"(solver='sqp', qp_solver='qrqp', no reference, no min_tension), got {refusal}")
+                                    f"(solver='sqp', qp_solver='qrqp', no reference), got {refusal}")
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations

@@ -102,10 +102,10 @@ class CompiledLoop:
 
 def loop_refusal(solver: str, qp_solver: str, problem) -> str | None:
     """Why ``loop="c"`` cannot run this controller, or ``None``: the C controller is the
-    exported package's (qrqp, no reference, no cable rows)."""
+    exported package's (qrqp generated into it; the guess shifted by repeating its last node and
+    input, not from a reference)."""
     for reason, bad in (("solver='fatrop'", solver != "sqp"), (f"qp_solver={qp_solver!r}", qp_solver != "qrqp"),
-                        ("a reference", problem.reference is not None),
-                        ("min_tension", problem.min_tension is not None)):
+                        ("a reference", problem.reference is not None)):
         if bad:
             return reason
     return None
