@@ -94,7 +94,8 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     x1, A, B, res, Q, M, R, g_x, g_u = stages(X[:, :N], U, times)
     Q_N, g_N = terminal_function(problem, nx, regularization)(X[:, N], t + N * h)
     merit = (total_cost_function(problem, nx, nu)(X, U, t), infeasibility(problem, x, X, U, x1, times), ca.mmax(res))
-    outputs = [A, B, ca.horzcat(x - X[:, 0], x1 - X[:, 1:]), ca.horzcat(Q, Q_N), M, R, ca.horzcat(g_x, g_N), g_u, *merit]
+    outputs = [A, B, ca.horzcat(x - X[:, 0], x1 - X[:, 1:]), ca.horzcat(Q, Q_N), M, R, ca.horzcat(g_x, g_N), g_u,
+               *merit]
     names = ["A", "B", "d", "Q", "M", "R", "g_x", "g_u", "J", "c", "res"]
     if problem.min_tension is not None:
         pulls = cable_pull_blocks(problem).map("mpc_cable_blocks", "serial", int(N), [], [])
@@ -341,7 +342,8 @@ class MPC:
         qp_in_c = self.qp_solver in GENERATED
         compiled = [f for f in self.functions if f.name() != "mpc_qp" or qp_in_c]
         name = f"{self.model.name}_mpc"
-        lib = compile_functions(name, compiled, extra_sources=controller_sources(self.model, self.problem, compiled, name))
+        lib = compile_functions(name, compiled,
+                                extra_sources=controller_sources(self.model, self.problem, compiled, name))
         lib.setdefault("mpc_qp", InProcessQP(self.functions[1]))
         self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions[1:4])
         self._c = CompiledLoop(self._update.library, name, self.nx, self.nu, self.N, qp_rows(self.problem, self.nx),
