@@ -190,12 +190,16 @@ def test_qp_blocks_by_intervals_equal_differences_and_the_horizon_hessian(model)
 
 
 @pytest.mark.slow                # compiles the controller's package
-@pytest.mark.parametrize("options", [{"loop": "c"}, {"qp_solver": "qpoases"}, {"min_tension": 50.0}],
-                         ids=["loop_c", "qpoases", "min_tension"])
+@pytest.mark.parametrize("options", [
+    {"loop": "c"}, {"qp_solver": "qpoases"}, {"min_tension": 50.0},
+    {"reference": (np.array([0.0, 0.2]), np.array([[0, 0, -1.0, 0, 0, 0], [0.02, 0, -0.95, 0, 0, 0.1]]),
+                   np.array([[0.9], [1.1]])), "state_weight": 2.0, "input_weight": 0.5}],
+    ids=["loop_c", "qpoases", "min_tension", "reference"])
 def test_qp_condensed_by_the_controllers_c_equals_the_horizon_condensed_densely(model, options):
     """The QP condensed by the compiled controller's C (``ncgen_condense.h`` on the blocks of
     ``mpc_qp_blocks``: the exported package's, ``loop="c"``'s and every Python loop's, whatever
-    the QP solver and with the cables' rows) against the same dense reference; the cables' rows
+    the QP solver, with the cables' rows and with a reference to track, whose costs the dense
+    reference's Hessian holds) against the same dense reference; the cables' rows
     are checked by ``tests/test_mpc_min_tension.py``."""
     mpc = nc.MPC(ocp_of(model), terminal_weight=1e3, sx_qr_max_nnz=0, **options)
     t = 0.1
