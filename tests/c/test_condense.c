@@ -18,6 +18,7 @@ typedef double casadi_real;
 #define NCGEN_MPC_N 4
 #define NXS (NCGEN_MPC_NX * (NCGEN_MPC_N + 1))
 #define NUS (NCGEN_MPC_NU * NCGEN_MPC_N)
+#define NCGEN_MPC_PULLS 3
 #include "ncgen_condense.h"
 
 #define NX NCGEN_MPC_NX
@@ -75,7 +76,7 @@ static double cost(const double *U, double *X) {
   return J;
 }
 
-#define NP 3          /* pulls per interval */
+#define NP NCGEN_MPC_PULLS
 #define R0 2          /* rows before the cables' (the state bounds') */
 #define NR (R0 + NP * NN)
 
@@ -91,7 +92,7 @@ static double taut_rows(const double *S, const double *s) {
   for (i = 0; i < NP * NU * NN; ++i) Pu[i] = uniform();
   for (i = 0; i < NR * NUS; ++i) A_t[i] = 42.0;
   lb[0] = lb[1] = 42.0;
-  ncgen_condense_taut(NP, P, Pa, Pb, Pu, T_min, S, s, NR, R0, A_t, lb);
+  ncgen_condense_taut(P, Pa, Pb, Pu, T_min, S, s, NR, R0, A_t, lb);
   for (c = 0; c < NUS; ++c) worst = fmax(worst, fabs(A_t[c * NR] - 42.0) + fabs(A_t[1 + c * NR] - 42.0));
   worst = fmax(worst, fabs(lb[0] - 42.0) + fabs(lb[1] - 42.0));
   for (c = -1; c < NUS; ++c) {                     /* U = 0, then U = e_c */

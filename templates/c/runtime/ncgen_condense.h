@@ -96,16 +96,18 @@ static void ncgen_condense(const ncgen_qp_blocks* b, casadi_real* S, casadi_real
         for (c = c2 + 1; c < NUS; ++c) H[c2 + c * NUS] = H[c + c2 * NUS];
 }
 
-/* The cables' rows of the QP (the path constraint P >= T_min linearised, ncgen.control.mpc_problem):
+#ifdef NCGEN_MPC_PULLS
+/* The cables' rows of the QP (the path constraint P >= T_min linearised, ncgen.control.mpc_problem),
+ * defined where the package defines NCGEN_MPC_PULLS (np, the pulls per interval, > 0):
  * for interval k its np pulls P_k (np x N: column k), their Jacobians P_a,k, P_b,k in x_k, x_{k+1}
  * (np x NX blocks side by side) and P_u,k in u_k (np x NU blocks), on the condensed prediction
  * dx_j = S_j dU + s_j (ncgen_condense's S, s):
  *     A_k = P_a,k S_k + P_b,k S_{k+1} + P_u,k E_k,   lb_k = T_min - P_k - P_a,k s_k - P_b,k s_{k+1},
  * written into the rows r0 + k np .. of A (n_rows x NUS, column-major) and lb. */
-static void ncgen_condense_taut(int np, const casadi_real* P, const casadi_real* Pa, const casadi_real* Pb,
+static void ncgen_condense_taut(const casadi_real* P, const casadi_real* Pa, const casadi_real* Pb,
                                 const casadi_real* Pu, casadi_real T_min, const casadi_real* S, const casadi_real* s,
                                 int n_rows, int r0, casadi_real* A, casadi_real* lb) {
-    const int nx = NCGEN_MPC_NX, nu = NCGEN_MPC_NU;
+    const int nx = NCGEN_MPC_NX, nu = NCGEN_MPC_NU, np = NCGEN_MPC_PULLS;
     int i, j, k, c;
     for (k = 0; k < NCGEN_MPC_N; ++k)
         for (i = 0; i < np; ++i) {
@@ -130,3 +132,4 @@ static void ncgen_condense_taut(int np, const casadi_real* P, const casadi_real*
             }
         }
 }
+#endif
