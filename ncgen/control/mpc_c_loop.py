@@ -7,7 +7,9 @@ line searches, checks and the shift of the guess run in C, as in the package of
 :func:`ncgen.control.export.export_mpc`, and Python makes one ctypes call per control step.
 The controller's struct lives in a NumPy buffer; its first members are the guess ``X``
 (nx × (N + 1), node by node), ``U`` (nu × N) and the last solution ``X_sol``, ``U_sol``
-(``templates/c/mpc/mpc.h.j2``), read as views.
+(``templates/c/mpc/mpc.h.j2``), read as views.  Every SQP controller's package holds this C, and
+its ``mpc_condensed_qp`` gives the Python loop its QP (``ncgen_condense.h``: the one condensing);
+where the QP solver is not generated (qpOASES) the package holds only that condensing.
 """
 from __future__ import annotations
 
