@@ -11,15 +11,21 @@ function).  The constraint's rows are the pull's first-order model
 ``Σ max(0, T_min − P)`` (checked by hand); bad values are refused by name."""
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+
 import numpy as np
 import pytest
 
 import ncgen as nc
-from ncgen.control.mpc import merit_function, mpc_functions
+from ncgen.control.mpc import merit_function
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.errors import NcgenError
 
 K, C, MASS = 200.0, 5.0, 1.0
+CC = os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc")
+SAN = "-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
 
 
 def hanging(cable=True):
@@ -74,12 +80,10 @@ def test_bad_qp_solver_refused_by_name(model):
         nc.MPC(rising(model), qp_solver="gurobi")
 
 
-def test_the_ocps_floor_is_the_mpcs_and_export_refuses_it(model, tmp_path):
+def test_the_ocps_floor_is_the_mpcs(model):
     ocp = rising(model).min_tension(3.0)
     assert mpc_problem(ocp, 1e3).min_tension == 3.0
     assert mpc_problem(ocp, 1e3, min_tension=1.0).min_tension == 1.0
-    with pytest.raises(NcgenError, match=r"export_mpc: the problem's min_tension \(3 N"):
-        nc.export_mpc(ocp, tmp_path)
 
 
 def test_min_tension_refused_without_cables():
@@ -87,19 +91,21 @@ def test_min_tension_refused_without_cables():
         nc.MPC(rising(hanging(cable=False)), min_tension=1.0)
 
 
+@pytest.mark.slow                # compiles the controller's package
 def test_taut_rows_are_the_pulls_first_order_model(model):
-    """The QP's tension rows ``A δU ≥ lb`` are ``f(0) + f′(0) ≥ T_min`` with
+    """The QP's tension rows ``A δU ≥ lb`` (condensed by the controller's C, ``ncgen_condense.h``,
+    from the pulls' blocks) are ``f(0) + f′(0) ≥ T_min`` with
     ``f(τ) = P(q̄_j + τ δq_j, w̄_k + τ δw_k, ū_k + τ δu_k)`` (``w_k = (q_{k+1} − q_k) / h``: where
     the step evaluates the pull), ``vec δX = S δU + s`` (the QP's own prediction,
     ``s``: the guess's gaps closed), ``f′`` by central differences of the pull by hand."""
     N, T_min = 3, 2.0
-    problem = mpc_problem(rising(model, N=N, t_final=0.06), 1e3, min_tension=T_min)
-    data = mpc_functions(model, problem)[0]
+    mpc = nc.MPC(rising(model, N=N, t_final=0.06), min_tension=T_min, sx_qr_max_nnz=0)
     rng = np.random.default_rng(1)
     x = np.array([0.01, -0.02, -0.97, 0.1, 0.0, 0.4])
     X = x + 0.01 * rng.normal(size=(N + 1, 6))
     U = 0.9 + 0.01 * rng.normal(size=(N, 1))
-    _, _, A, lba, uba, _, _, Xs, S = (np.array(o) for o in data(x, 0.0, X.T, U.T)[:9])
+    _, _, A, lba, uba, _, _, Xs, S = (o.copy() for o in mpc._data(x, np.array([0.0]), X.ravel(), U.ravel())[:9])
+    A, S = A.reshape(-1, N, order="F"), S.reshape(-1, N, order="F")
     assert A.shape == (2 * N, N) and np.all(np.isinf(uba))
     for dU in (np.zeros(N), rng.normal(size=N)):
         dX = (Xs.ravel() + S @ dU).reshape(N + 1, 6) - X
@@ -150,3 +156,33 @@ def test_mpc_keeps_the_cable_taut_and_its_iterates_feasible(model, qp_solver):
     feasible = gaps < 1e-8
     assert feasible[-4:].all(), gaps                         # the last four solutions feasible
     assert np.all(pulls[feasible] >= T_min - 1e-6), pulls
+
+
+@pytest.mark.slow                # builds the exported package under the sanitizers
+@pytest.mark.skipif(CC is None, reason="no C compiler")
+def test_exported_package_and_c_loop_answer_the_python_loops_inputs(model, tmp_path):
+    """An OCP with a floor (``ocp.min_tension``) exported: the package (its QP's cable rows
+    condensed by the same ``ncgen_condense.h``) builds with ``-Wall -Wextra -Werror`` under the
+    sanitizers, and its demo's closed loop (controller and plant in C), ``loop="c"`` and the
+    Python loop answer the same inputs and states to 1e-9; the last solution keeps the cable's
+    pull ≥ T_min (by hand)."""
+    from ncgen.control.export import closed_loop
+    T_min, t_end = 2.0, 0.3
+    ocp = rising(model).min_tension(T_min)
+    out = tmp_path / "hang"
+    nc.export_mpc(ocp, out, iterations=3, t_end=t_end, warmup=3)
+    build = subprocess.run(["make", f"CC={CC}", f"CFLAGS=-O0 -g -Werror {SAN}", f"LDFLAGS={SAN}", "demo"], cwd=out,
+                           capture_output=True, text=True, timeout=600)
+    assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
+    run = subprocess.run(["./demo"], cwd=out, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "ASAN_OPTIONS": "detect_leaks=0", "UBSAN_OPTIONS": "halt_on_error=1"})
+    assert run.returncode == 0 and not run.stderr, run.stderr[-3000:]
+    C = np.array([[float(v) for v in line.split()] for line in run.stdout.splitlines()])
+    x0 = np.array([0, 0, -1.0, 0, 0, 0])
+    for loop in ("python", "c"):
+        mpc = nc.MPC(ocp, iterations=3, loop=loop)
+        T, U, X = closed_loop(mpc, x0, t_end, warmup=3)
+        assert C.shape == (len(T), 2 + 6) and np.max(np.abs(C[:, 1] - U[:, 0])) <= 1e-9, loop
+        assert np.max(np.abs(C[:, 2:] - X)) <= 1e-9, loop
+        Xs, Us = mpc.solution
+        assert min(step_pull(Xs, Us, k, j, mpc.h) for k in range(mpc.N) for j in (k, k + 1)) >= T_min - 1e-6

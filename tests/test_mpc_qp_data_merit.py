@@ -1,13 +1,14 @@
-"""The MPC's QP-data function returns the guess's merit (cost ``J``, infeasibility ``c``,
-largest step residual) from the steps it linearises, in place of a separate merit call at
-every SQP iteration (issue 37): its values equal the merit function's, whose steps are solved
-by another Newton scheme (the staged RATTLE solve of :func:`ncgen.control.discrete.step_functions`
+"""The MPC's QP blocks return the guess's merit (cost ``J``, infeasibility ``c``, largest step
+residual) from the steps they linearise, in place of a separate merit call at every SQP
+iteration (issue 37): their values equal the merit function's, whose steps are solved by
+another Newton scheme (the staged RATTLE solve of :func:`ncgen.control.discrete.step_functions`
 against the whole-residual rootfinder of the step Jacobians), to round-off, at a guess with
 shooting gaps, a state bound violated and (with ``min_tension``) a slack cable; and ``c`` is
-the sum of its terms evaluated by hand from the merit's own steps.  Its QP (built from one
-interval's kernel per interval), and the same QP condensed by the compiled controller's C from
-the intervals' blocks, equal the horizon's Gauss–Newton QP condensed densely from
-finite-difference step Jacobians and the whole horizon's cost Hessian."""
+the sum of its terms evaluated by hand from the merit's own steps.  The blocks (built from one
+interval's kernel per interval) equal central-difference step Jacobians and the whole
+horizon's cost Hessian; the QP condensed from them by the controller's C (``ncgen_condense.h``,
+the one condensing of every loop and option) equals the horizon's Gauss–Newton QP condensed
+densely here, in NumPy."""
 from __future__ import annotations
 
 import numpy as np
@@ -51,9 +52,10 @@ def problem_of(model, min_tension):
 
 
 @pytest.mark.parametrize("min_tension", [None, 50.0])
-def test_qp_data_returns_the_merit_of_its_guess(model, min_tension):
+def test_qp_blocks_return_the_merit_of_their_guess(model, min_tension):
     problem = problem_of(model, min_tension)
     data = mpc_functions(model, problem)[0]
+    assert data.name() == "mpc_qp_blocks"
     merit = merit_function(model, problem)
     rng = np.random.default_rng(3)
     x = np.array([0.01, -0.02, -0.97, 0.1, 0.0, 0.4])
@@ -78,13 +80,9 @@ def test_qp_data_returns_the_merit_of_its_guess(model, min_tension):
     assert abs(float(out["c"]) - by_hand) <= 1e-12 * by_hand
 
 
-def horizon_condensed_densely(model, problem, x, t, X, U):
-    """``(S, s, Hc, gc)``: the Gauss–Newton QP of the whole horizon condensed densely: the
-    cost's Hessian and gradient of the whole horizon (one SX expression in all the nodes and
-    inputs), the step Jacobians by central differences of the merit's own step (another Newton
-    scheme than the QP data's), ``S`` and ``s`` by the linearised recursion in NumPy."""
-    import casadi as ca
-    from ncgen.control.mpc import REGULARIZATION, total_cost
+def step_jacobians_by_differences(model, problem, t, X, U):
+    """``(A, B)``: the step Jacobians at the nodes by central differences of the merit's own
+    step (another Newton scheme than the QP blocks'), and the step ``f(k, x, u)``."""
     nx, nu = X.shape[1], U.shape[1]
     step = step_functions(model, H)["step"]
 
@@ -96,6 +94,29 @@ def horizon_condensed_densely(model, problem, x, t, X, U):
          for k in range(N)]
     B = [np.column_stack([(f(k, X[k], U[k] + eps * e) - f(k, X[k], U[k] - eps * e)) / (2 * eps) for e in np.eye(nu)])
          for k in range(N)]
+    return A, B, f
+
+
+def horizon_hessian(problem, t, X, U):
+    """``(H, g)``: the Hessian (with the regularisation) and gradient of the whole horizon's
+    cost in ``[vec X; vec U]`` (one SX expression in all the nodes and inputs)."""
+    import casadi as ca
+    from ncgen.control.mpc import REGULARIZATION, total_cost
+    nx, nu = X.shape[1], U.shape[1]
+    Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
+    y = ca.vertcat(ca.vec(Xs), ca.vec(Us))
+    Hy, gy = ca.hessian(total_cost(problem, Xs, Us, ts), y)
+    Hy, gy = (np.array(ca.Function("hg", [Xs, Us, ts], [Hy, gy])(X.T, U.T, t)[i]) for i in (0, 1))
+    return Hy + REGULARIZATION * np.eye(len(Hy)), gy.ravel()
+
+
+def horizon_condensed_densely(model, problem, x, t, X, U):
+    """``(S, s, Hc, gc)``: the Gauss–Newton QP of the whole horizon condensed densely: the
+    cost's Hessian and gradient of the whole horizon (:func:`horizon_hessian`), the step
+    Jacobians by central differences (:func:`step_jacobians_by_differences`), ``S`` and ``s``
+    by the linearised recursion in NumPy."""
+    nx, nu = X.shape[1], U.shape[1]
+    A, B, f = step_jacobians_by_differences(model, problem, t, X, U)
     S, s = np.zeros((N + 1, nx, N * nu)), np.zeros((N + 1, nx))
     s[0] = x - X[0]
     for k in range(N):
@@ -103,13 +124,9 @@ def horizon_condensed_densely(model, problem, x, t, X, U):
         S[k + 1][:, k * nu:(k + 1) * nu] = B[k]
         s[k + 1] = A[k] @ s[k] + f(k, X[k], U[k]) - X[k + 1]
     S, s = S.reshape(-1, N * nu), s.reshape(-1)
-    Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
-    y = ca.vertcat(ca.vec(Xs), ca.vec(Us))
-    Hy, gy = ca.hessian(total_cost(problem, Xs, Us, ts), y)
-    Hy, gy = (np.array(ca.Function("hg", [Xs, Us, ts], [Hy, gy])(X.T, U.T, t)[i]) for i in (0, 1))
-    Hy += REGULARIZATION * np.eye(len(Hy))
+    Hy, gy = horizon_hessian(problem, t, X, U)
     E = np.vstack([S, np.eye(N * nu)])                   # [δX; δU] = E δU + [s; 0]
-    return S, s, E.T @ Hy @ E, E.T @ (Hy @ np.concatenate([s, np.zeros(N * nu)]) + gy.ravel())
+    return S, s, E.T @ Hy @ E, E.T @ (Hy @ np.concatenate([s, np.zeros(N * nu)]) + gy)
 
 
 def guess(nx=6, nu=1):
@@ -137,29 +154,62 @@ def check_condensed(out, reference, x, X, U):
     assert np.array_equal(out["lbx"], 0.5 - U.ravel()) and np.array_equal(out["ubx"], 1.5 - U.ravel())
 
 
-def test_qp_data_by_intervals_equal_the_horizon_condensed_densely(model):
-    """The QP data, built from one interval's kernel called per interval (a serial map) and
-    condensed in MX, equal the Gauss–Newton QP of the whole horizon condensed densely here
-    (:func:`horizon_condensed_densely`), at a guess with shooting gaps and a state bound
-    violated, to the differences' accuracy."""
+def test_qp_blocks_by_intervals_equal_differences_and_the_horizon_hessian(model):
+    """The QP blocks, built from one interval's kernel called per interval (a serial map), equal
+    the step Jacobians by central differences (:func:`step_jacobians_by_differences`), the
+    shooting gaps of the merit's own step and the whole horizon's cost Hessian and gradient
+    (:func:`horizon_hessian`: its diagonal blocks, the cross terms ``M_k``; zero elsewhere), at a
+    guess with shooting gaps and a state bound violated: what the controller's C condenses
+    (``tests/c/test_condense.c`` checks its condensing; the slow test below the whole chain)."""
     problem = problem_of(model, None)
     t = 0.1
     x, X, U = guess()
-    data = mpc_functions(model, problem)[0]
-    out = dict(zip(data.name_out(), data(x, t, X.T, U.T)))
-    check_condensed(out, horizon_condensed_densely(model, problem, x, t, X, U), x, X, U)
+    nx, nu = X.shape[1], U.shape[1]
+    blocks = mpc_functions(model, problem)[0]
+    out = {k: np.array(v) for k, v in zip(blocks.name_out(), blocks(x, t, X.T, U.T))}
+    A, B, f = step_jacobians_by_differences(model, problem, t, X, U)
+    # measured: 1e-10 relative (the central differences' accuracy)
+    for k in range(N):
+        assert np.max(np.abs(out["A"][:, nx * k:nx * (k + 1)] - A[k])) <= 1e-8 * np.max(np.abs(A[k]))
+        assert np.max(np.abs(out["B"][:, nu * k:nu * (k + 1)] - B[k])) <= 1e-8 * np.max(np.abs(B[k]))
+    gaps = np.column_stack([x - X[0]] + [f(k, X[k], U[k]) - X[k + 1] for k in range(N)])
+    assert np.max(np.abs(out["d"] - gaps)) <= 1e-12 * np.max(np.abs(gaps))
+    Hy, gy = horizon_hessian(problem, t, X, U)
+    nX = nx * (N + 1)
+    H_blocks = np.zeros_like(Hy)
+    for k in range(N + 1):
+        a = slice(nx * k, nx * (k + 1))
+        H_blocks[a, a] = out["Q"][:, a]
+        if k < N:
+            b = slice(nX + nu * k, nX + nu * (k + 1))
+            H_blocks[a, b], H_blocks[b, a] = out["M"][:, nu * k:nu * (k + 1)], out["M"][:, nu * k:nu * (k + 1)].T
+            H_blocks[b, b] = out["R"][:, nu * k:nu * (k + 1)]
+    np.testing.assert_allclose(H_blocks, Hy, rtol=1e-12, atol=1e-12 * np.max(np.abs(Hy)))
+    np.testing.assert_allclose(np.concatenate([out["g_x"].ravel(order="F"), out["g_u"].ravel(order="F")]), gy,
+                               rtol=1e-12, atol=1e-12 * np.max(np.abs(gy)))
 
 
 @pytest.mark.slow                # compiles the controller's package
-def test_qp_condensed_by_the_controllers_c_equals_the_horizon_condensed_densely(model):
-    """The same QP condensed by the compiled controller's C (``ncgen_condense.h`` on the blocks
-    of ``mpc_qp_blocks``: the exported package's and ``loop="c"``'s, and the Python loop's where
-    the controller is compiled) against the same dense reference."""
-    mpc = nc.MPC(ocp_of(model), terminal_weight=1e3, loop="c")
+@pytest.mark.parametrize("options", [
+    {"loop": "c"}, {"qp_solver": "qpoases"}, {"min_tension": 50.0},
+    {"reference": (np.array([0.0, 0.2]), np.array([[0, 0, -1.0, 0, 0, 0], [0.02, 0, -0.95, 0, 0, 0.1]]),
+                   np.array([[0.9], [1.1]])), "state_weight": 2.0, "input_weight": 0.5}],
+    ids=["loop_c", "qpoases", "min_tension", "reference"])
+def test_qp_condensed_by_the_controllers_c_equals_the_horizon_condensed_densely(model, options):
+    """The QP condensed by the compiled controller's C (``ncgen_condense.h`` on the blocks of
+    ``mpc_qp_blocks``: the exported package's, ``loop="c"``'s and every Python loop's, whatever
+    the QP solver, with the cables' rows and with a reference to track, whose costs the dense
+    reference's Hessian holds) against the same dense reference; the cables' rows
+    are checked by ``tests/test_mpc_min_tension.py``."""
+    mpc = nc.MPC(ocp_of(model), terminal_weight=1e3, sx_qr_max_nnz=0, **options)
     t = 0.1
     x, X, U = guess()
     names = ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S", "J", "c", "res"]
     out = dict(zip(names, mpc._c.condensed_qp(x, np.array([t]), X.ravel(), U.ravel())))
+    if "min_tension" in options:                    # the height's rows first, then the cables' 2 N
+        assert out["lba"].size == 3 * N and np.all(np.isinf(out["uba"][N:]))
+        out["A"] = out["A"].reshape(3 * N, -1, order="F")[:N]
+        out["lba"], out["uba"] = out["lba"][:N], out["uba"][:N]
     check_condensed(out, horizon_condensed_densely(model, mpc.problem, x, t, X, U), x, X, U)
     J, c, res = (float(o) for o in merit_function(model, mpc.problem)(x, t, X.T, U.T))
     assert out["res"][0] < 1e-10 and abs(out["J"][0] - J) <= 1e-12 * abs(J) and abs(out["c"][0] - c) <= 1e-12 * c

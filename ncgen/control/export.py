@@ -128,9 +128,6 @@ def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", itera
     model = ocp.model
     name = name or model.name
     _check_options(solver, fatrop_options, iterations, substeps, warmup)
-    if ocp.cable_min_tension is not None:
-        raise NcgenError(f"export_mpc: the problem's min_tension ({ocp.cable_min_tension:g} N, the cables' pull floor) "
-                         "is not exported: the exported controller has no cable rows; use nc.MPC in Python")
     problem = mpc_problem(ocp, terminal_weight)
     nx, nu = 2 * model.nq, model.nu
     t_end = as_scalar(t_end, "export_mpc: t_end")
@@ -151,7 +148,7 @@ def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", itera
         from ncgen.control.export_fatrop import fatrop_controller
         fns, own, controller = fatrop_controller(model, problem, name, iterations, fatrop_options)
     else:
-        fns, own = mpc_functions(model, problem, regularization=REGULARIZATION)[1:], []      # C condenses the blocks
+        fns, own = mpc_functions(model, problem, regularization=REGULARIZATION), []      # C condenses the blocks
         controller = controller_context(model, problem, fns, iterations, line_search_rules(model))
     kind = "fatrop" if solver == "fatrop" else "mpc"
     context = {**controller, **_demo_context(model, problem, plant, x0, t_end, substeps, warmup, pl)}

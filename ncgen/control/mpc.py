@@ -13,8 +13,8 @@ inputs on the ``N`` intervals; multiple shooting):
    the cost at the guess — a Gauss–Newton Hessian: the dynamics' curvature is left out),
    subject to ``δx_0 = x − x̄_0``, ``δx_{k+1} = A_k δx_k + B_k δu_k + x̄⁺_k − x̄_{k+1}``, the
    OCP's bounds moved by the guess (and, with ``min_tension``, the cables' pull linearised,
-   :func:`taut_rows`) — condensed onto the inputs (``vec δX = S δU + s``,
-   :func:`condense`: ``N·nu`` variables, the bounded state components as general rows) and
+   :func:`cable_pull_blocks`) — condensed onto the inputs (``vec δX = S δU + s``,
+   ``ncgen_condense.h``: ``N·nu`` variables, the bounded state components as general rows) and
    solved by CasADi's active-set ``qrqp``;
 3. a backtracking line search with a filter on (cost ``J``, infeasibility ``c``: the ℓ1 norm
    of the shooting gaps and of the state-bound violations, :func:`merit_function`) along
@@ -25,16 +25,15 @@ inputs on the ``N`` intervals; multiple shooting):
    returned is inside its bounds (and checked), and nothing NaN or diverging is ever answered
    or kept as the next guess; a guess along which the steps do not converge is an error.
 
-An iteration is four generated functions (:func:`mpc_functions`): the QP's data (with the
+An iteration is four generated functions (:func:`mpc_functions`): the QP's blocks (with the
 guess's cost and infeasibility, from the same steps), ``qrqp``, the full step and the merit
-of a trial.  The QP's data call one interval's kernel (:func:`stage_function`) at every
-interval through a serial ``map``, so their C is one interval's, whatever the horizon; the
-compiled controller (:func:`ncgen.control.export.export_mpc`'s, also compiled into the MPC's
-own package where it applies, :mod:`ncgen.control.mpc_c_loop`) condenses the intervals' blocks
-(``mpc_qp_blocks``) in plain C (``templates/c/runtime/ncgen_condense.h``), and ``mpc(x, t)``
-takes its QP data from that C in both loops, so Python and C compute the same numbers; the
-controllers it does not cover (a reference, ``min_tension``, an in-process QP solver)
-condense in MX (``mpc_qp_data``, also the reference the C is tested against).  The other
+of a trial.  The blocks call one interval's kernel (:func:`stage_function`) at every
+interval through a serial ``map``, so their C is one interval's, whatever the horizon.  The
+controller's C (:func:`ncgen.control.export.export_mpc`'s, compiled into the MPC's own package
+too, :mod:`ncgen.control.mpc_c_loop`) condenses them in plain C
+(``templates/c/runtime/ncgen_condense.h``: the one implementation of the condensing), and
+``mpc(x, t)`` takes its QP data from that C in every loop and with every option (a reference,
+``min_tension``, an in-process QP solver), so Python and C compute the same numbers.  The other
 functions are called through :class:`ncgen.codegen.direct.DirectFunction`.
 """
 from __future__ import annotations
@@ -69,66 +68,55 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
                   qp_solver: str = "qrqp") -> list[ca.Function]:
     """The CasADi functions of one SQP iteration (see the module docstring):
 
-    * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S, J, c, res)``: the
-      condensed QP in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``) and the guess's merit
-      (:func:`merit_function`'s outputs, from the steps the QP is built on);
+    * ``mpc_qp_blocks: (x, t, X̄, Ū) -> (A, B, d, Q, M, R, g_x, g_u, J, c, res[, P, P_a, P_b, P_u])``:
+      the QP before condensing, the intervals' blocks side by side (dense; ``d``: ``x − x̄_0`` and
+      the shooting gaps ``x̄⁺_k − x̄_{k+1}``, ``Q``, ``g_x`` with the terminal node's last), the
+      guess's merit (:func:`merit_function`'s outputs, from the steps the blocks are built on) and,
+      with ``min_tension``, the cables' pulls and their Jacobians (:func:`cable_pull_blocks`).  The
+      controller's C condenses them (``templates/c/runtime/ncgen_condense.h``) into the QP in
+      ``δU``: ``H, g``, the rows ``lba ≤ A δU ≤ uba`` (the bounded state components at nodes
+      ``1..N``, then the cables' rows), ``lbx ≤ δU ≤ ubx`` and ``vec δX = S δU + (Xs − vec X̄)``;
     * ``mpc_qp``: CasADi's ``qrqp`` on it (returns its last iterate also when it reports a
       failure: the caller checks it), or the ``qp_solver`` of :mod:`ncgen.control.mpc_qp`;
     * ``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step;
-    * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial;
-    * ``mpc_qp_blocks: (x, t, X̄, Ū) -> (A, B, d, Q, M, R, g_x, g_u, J, c, res)``: the QP before
-      condensing, the intervals' blocks side by side (dense; ``d``: ``x − x̄_0`` and the shooting
-      gaps ``x̄⁺_k − x̄_{k+1}``, ``Q``, ``g_x`` with the terminal node's last) and the guess's
-      merit: the compiled controller's input, which condenses in C (``templates/c/runtime/
-      ncgen_condense.h``: the same QP as ``mpc_qp_data``, dense loops over the blocks).
+    * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial.
 
     ``sx_qr_max_nnz``: the step Jacobians' QR is unrolled into straight-line C up to this size
     (:func:`ncgen.control.discrete.qr_solve_columns`), else generated as loops.
     """
     h, N = problem.h, problem.N
     nx, nu = 2 * model.nq, model.nu
-    nX, nU = nx * (N + 1), nu * N
-    # the condensed QP's general rows: the bounded state components at nodes 1..N
-    lo_x, hi_x = problem.x_bounds
-    bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
-    rows = [nx * k + i for k in range(1, N + 1) for i in bounded]
-    n_taut = 0 if problem.min_tension is None else N * problem.cable_pull.numel_out(0)
-    qp = qp_function(qp_solver, nU, len(rows) + n_taut, qp_max_iter)
-
+    qp = qp_function(qp_solver, nu * N, qp_rows(problem, nx), qp_max_iter)
     x, t = ca.MX.sym("x", nx), ca.MX.sym("t")
     X, U = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
-    lo_u, hi_u = (ca.DM(b) for b in problem.u_bounds)
     times = t + h * ca.DM(np.arange(N)).T
     stages = stage_function(model, problem, regularization, sx_qr_max_nnz).map("mpc_stages", "serial", int(N), [], [])
     x1, A, B, res, Q, M, R, g_x, g_u = stages(X[:, :N], U, times)
     Q_N, g_N = terminal_function(problem, nx, regularization)(X[:, N], t + N * h)
-    H_XX = ca.diagcat(*ca.horzsplit(Q, nx), Q_N)
-    H_XU = ca.vertcat(ca.diagcat(*ca.horzsplit(M, nu)), ca.MX(nx, nU))
-    H_UU = ca.diagcat(*ca.horzsplit(R, nu))
-    g = ca.vertcat(ca.vec(g_x), g_N, ca.vec(g_u))
-    S, s = condense(A, B, x - X[:, 0], x1 - X[:, 1:], N)
-    St = S.T
-    G = ca.mtimes(St, ca.mtimes(H_XX, S) + 2 * H_XU)         # Hc = sym(G) + H_UU: Sᵀ H_XU's transpose is H_XUᵀ S
-    gc = ca.mtimes(St, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
-    Xn = ca.vec(X) + s
-    A_rows, lb_rows = S[rows, :], ca.DM(np.tile(lo_x[bounded], N)) - Xn[rows]
-    ub_rows = ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows]
-    if n_taut:
-        A_taut, lb_taut = taut_rows(problem, X, U, times, S, s)
-        A_rows, lb_rows = ca.vertcat(A_rows, A_taut), ca.vertcat(lb_rows, lb_taut)
-        ub_rows = ca.vertcat(ub_rows, ca.DM.inf(n_taut))
     merit = (total_cost_function(problem, nx, nu)(X, U, t), infeasibility(problem, x, X, U, x1, times), ca.mmax(res))
-    data = ca.Function(
-        "mpc_qp_data", [x, t, X, U],
-        [ca.densify(e) for e in (0.5 * (G + G.T) + H_UU, gc, A_rows, lb_rows, ub_rows, ca.vec(ca.repmat(lo_u, 1, N) - U),
-                                 ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S, *merit)],
-        ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S", "J", "c", "res"])
-    blocks = ca.Function(
-        "mpc_qp_blocks", [x, t, X, U],
-        [ca.densify(e) for e in (A, B, ca.horzcat(x - X[:, 0], x1 - X[:, 1:]), ca.horzcat(Q, Q_N), M, R,
-                                 ca.horzcat(g_x, g_N), g_u, *merit)],
-        ["x", "t", "X_guess", "U_guess"], ["A", "B", "d", "Q", "M", "R", "g_x", "g_u", "J", "c", "res"])
-    return [data, qp, update_function(nx, nu, N), merit_function(model, problem), blocks]
+    outputs = [A, B, ca.horzcat(x - X[:, 0], x1 - X[:, 1:]), ca.horzcat(Q, Q_N), M, R, ca.horzcat(g_x, g_N), g_u,
+               *merit]
+    names = ["A", "B", "d", "Q", "M", "R", "g_x", "g_u", "J", "c", "res"]
+    if problem.min_tension is not None:
+        pulls = cable_pull_blocks(problem).map("mpc_cable_blocks", "serial", int(N), [], [])
+        outputs += pulls(X[:, :N], X[:, 1:], U, times)
+        names += ["P", "P_a", "P_b", "P_u"]
+    blocks = ca.Function("mpc_qp_blocks", [x, t, X, U], [ca.densify(e) for e in outputs],
+                         ["x", "t", "X_guess", "U_guess"], names)
+    return [blocks, qp, update_function(nx, nu, N), merit_function(model, problem)]
+
+
+def bounded_states(problem) -> np.ndarray:
+    """The state components with a finite bound: the QP's first rows, at nodes ``1..N``."""
+    lo_x, hi_x = problem.x_bounds
+    return np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
+
+
+def qp_rows(problem, nx: int) -> int:
+    """The condensed QP's general rows: the bounded state components at nodes ``1..N``, then,
+    with ``min_tension``, the cables' pulls at both ends of every interval."""
+    n_taut = 0 if problem.min_tension is None else problem.N * problem.cable_pull.numel_out(0)
+    return problem.N * len(bounded_states(problem)) + n_taut
 
 
 def update_function(nx: int, nu: int, N: int) -> ca.Function:
@@ -176,25 +164,19 @@ def terminal_function(problem, nx: int, regularization: float) -> ca.Function:
     return ca.Function("mpc_stage_terminal", [xs, ts], [H + regularization * ca.SX.eye(nx), g], ["x", "t"], ["Q", "g"])
 
 
-def taut_rows(problem, X, U, times, S, s):
-    """``(A, lb)``: the cables' path constraint (:mod:`ncgen.control.mpc_problem`) linearised
-    at the guess and condensed, ``A δU ≥ lb``: for each interval ``k``,
-    ``P_a δx_k + P_b δx_{k+1} + P_u δu_k ≥ T_min − P(x̄_k, x̄_{k+1}, ū_k)`` (``P``: the pulls at the
-    interval's two ends) with ``δx_j = S_j δU + s_j``."""
-    pull, N = problem.cable_pull, problem.N
-    nx, nu, m = pull.numel_in(0), pull.numel_in(2), pull.numel_out(0)
+def cable_pull_blocks(problem) -> ca.Function:
+    """``mpc_cable_block: (x_k, x_{k+1}, u_k, t_k) -> (P, P_a, P_b, P_u)``: the cables' pulls at
+    interval ``k``'s two ends (:mod:`ncgen.control.mpc_problem`) and their Jacobians in ``x_k``,
+    ``x_{k+1}``, ``u_k`` (SX).  The controller's C linearises the path constraint with them
+    (``ncgen_condense_taut``): ``P_a δx_k + P_b δx_{k+1} + P_u δu_k ≥ T_min − P`` with
+    ``δx_j = S_j δU + s_j``."""
+    pull = problem.cable_pull
+    nx, nu = pull.numel_in(0), pull.numel_in(2)
     xa, xb, us, ts = ca.SX.sym("x", nx), ca.SX.sym("x_next", nx), ca.SX.sym("u", nu), ca.SX.sym("t")
     P = pull(xa, xb, us, ts)
-    lin = ca.Function("cable_pull_lin", [xa, xb, us, ts],
-                      [P, ca.jacobian(P, xa), ca.jacobian(P, xb), ca.jacobian(P, us)])
-    A, lb = [], []
-    for k in range(N):
-        P_k, P_a, P_b, P_u = lin(X[:, k], X[:, k + 1], U[:, k], times[k])
-        a, b = slice(nx * k, nx * (k + 1)), slice(nx * (k + 1), nx * (k + 2))
-        E_k = ca.horzcat(ca.MX(m, nu * k), P_u, ca.MX(m, nu * (N - k - 1)))
-        A.append(ca.mtimes(P_a, S[a, :]) + ca.mtimes(P_b, S[b, :]) + E_k)
-        lb.append(problem.min_tension - P_k - ca.mtimes(P_a, s[a]) - ca.mtimes(P_b, s[b]))
-    return ca.vertcat(*A), ca.vertcat(*lb)
+    return ca.Function("mpc_cable_block", [xa, xb, us, ts],
+                       [P, ca.jacobian(P, xa), ca.jacobian(P, xb), ca.jacobian(P, us)],
+                       ["x", "x_next", "u", "t"], ["P", "P_a", "P_b", "P_u"])
 
 
 def merit_function(model, problem) -> ca.Function:
@@ -249,19 +231,6 @@ def total_cost(problem, X, U, t):
     return sum(problem.stage(X[:, k], U[:, k], t + k * h) for k in range(N)) + problem.terminal(X[:, N], t + N * h)
 
 
-def condense(A, B, d0, defects, N: int):
-    """``(S, s)`` with ``vec δX = S vec δU + s`` from ``δx_0 = d0`` and
-    ``δx_{k+1} = A_k δx_k + B_k δu_k + defects_k`` (``A``: nx × nx·N, ``B``: nx × nu·N)."""
-    nx, nu = A.size1(), B.size2() // N
-    S_rows, s_rows = [ca.MX(nx, nu * N)], [d0]
-    for k in range(N):
-        A_k, B_k = A[:, nx * k:nx * (k + 1)], B[:, nu * k:nu * (k + 1)]
-        pad = [ca.MX(nx, nu * k), B_k, ca.MX(nx, nu * (N - k - 1))]
-        S_rows.append(ca.mtimes(A_k, S_rows[-1]) + ca.horzcat(*pad))
-        s_rows.append(ca.mtimes(A_k, s_rows[-1]) + defects[:, k])
-    return ca.vertcat(*S_rows), ca.vertcat(*s_rows)
-
-
 class MPC:
     """A receding-horizon controller for ``ocp`` (an :class:`~ncgen.optim.problem.OptimalControl`):
     ``u = mpc(x, t)``.
@@ -299,7 +268,7 @@ class MPC:
     ``loop``: ``"python"`` (the iterations driven from Python, every iteration reported) or
     ``"c"`` (the whole control step one call of the exported package's C controller compiled
     into the same package, :mod:`ncgen.control.mpc_c_loop`: the same numbers; ``qrqp``, no
-    reference, no ``min_tension``; only the last iteration of a step reported).
+    reference; only the last iteration of a step reported).
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
     from ``t``, and iterates on it.
@@ -328,7 +297,7 @@ class MPC:
         self.loop, refusal = check_loop(loop), loop_refusal(solver, qp_solver, self.problem)
         if self.loop == "c" and refusal is not None:
             raise OptimizationError(f"MPC: loop='c': the compiled control step is the exported package's "
-                                    f"(solver='sqp', qp_solver='qrqp', no reference, no min_tension), got {refusal}")
+                                    f"(solver='sqp', qp_solver='qrqp', no reference), got {refusal}")
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations
@@ -339,13 +308,14 @@ class MPC:
         #: Fatrop's stage-wise problem (``solver="fatrop"``), else ``None``; ``mpc.Z``: Fatrop's own
         #: part of the guess (the steps' unknowns, or the joint states: ``mpc.fatrop.form``).
         self.fatrop = self.Z = None
-        #: the compiled control step (:class:`~ncgen.control.mpc_c_loop.CompiledLoop`) where it applies
+        #: the controller's C (:class:`~ncgen.control.mpc_c_loop.CompiledLoop`): the SQP's condensing,
+        #: and its whole control step where it applies
         self._c = None
         if solver == "fatrop":
             from ncgen.control.mpc_fatrop import FatropSolver
             self.fatrop = FatropSolver(self.model, self.problem, fatrop_options, fatrop_form)
         else:
-            self._sqp_package(regularization, qp_max_iter, sx_qr_max_nnz, refusal)
+            self._sqp_package(regularization, qp_max_iter, sx_qr_max_nnz)
         self._residual_tol = residual_tolerance(self.model)
         #: the QP solver's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
@@ -360,28 +330,25 @@ class MPC:
         self._u_lo, self._u_hi = (np.tile(b, self.N) for b in self.u_bounds)   # the inputs' bounds along the horizon
         self.X = self.U = self.solution = None
 
-    def _sqp_package(self, regularization: float, qp_max_iter: int, sx_qr_max_nnz: int | None, refusal) -> None:
-        """The SQP's functions (:func:`mpc_functions`) compiled into one package, with the
-        controller's C (the compiled control step) unless ``refusal`` says why it does not apply;
-        an in-process QP where ``qp_solver`` is not generated."""
+    def _sqp_package(self, regularization: float, qp_max_iter: int, sx_qr_max_nnz: int | None) -> None:
+        """The SQP's functions (:func:`mpc_functions`) compiled into one package with the
+        controller's C (:mod:`ncgen.control.mpc_c_loop`), which condenses the QP for every loop;
+        the QP solver in this process where ``qp_solver`` is not generated (the controller's C
+        then only condenses)."""
         self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
                                        qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz, qp_solver=self.qp_solver)
+        from ncgen.control.mpc_c_loop import CompiledLoop
         from ncgen.control.step_support import compile_functions
-        unused = ("mpc_qp_data",) if refusal is None else ("mpc_qp_blocks",)   # the controller's C condenses
-        compiled = [f for f in self.functions if (f.name() != "mpc_qp" or self.qp_solver in GENERATED)
-                    and f.name() not in unused]
+        qp_in_c = self.qp_solver in GENERATED
+        compiled = [f for f in self.functions if f.name() != "mpc_qp" or qp_in_c]
         name = f"{self.model.name}_mpc"
-        lib = compile_functions(name, compiled, extra_sources=() if refusal else controller_sources(
-            self.model, self.problem, self.functions[1:], name))
+        lib = compile_functions(name, compiled,
+                                extra_sources=controller_sources(self.model, self.problem, compiled, name))
         lib.setdefault("mpc_qp", InProcessQP(self.functions[1]))
         self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions[1:4])
-        if refusal is None:               # the QP condensed by the controller's C, in both loops (the same numbers)
-            from ncgen.control.mpc_c_loop import CompiledLoop
-            self._c = CompiledLoop(self._update.library, name, self.nx, self.nu, self.N,
-                                   self.functions[0].nnz_out("lba"))
-            self._data = self._c.condensed_qp
-        else:
-            self._data = lib["mpc_qp_data"]
+        self._c = CompiledLoop(self._update.library, name, self.nx, self.nu, self.N, qp_rows(self.problem, self.nx),
+                               controller=qp_in_c)
+        self._data = self._c.condensed_qp          # the QP condensed by the controller's C, in every loop
 
     def __repr__(self) -> str:
         if self.fatrop is not None:

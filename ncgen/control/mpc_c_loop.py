@@ -7,7 +7,9 @@ line searches, checks and the shift of the guess run in C, as in the package of
 :func:`ncgen.control.export.export_mpc`, and Python makes one ctypes call per control step.
 The controller's struct lives in a NumPy buffer; its first members are the guess ``X``
 (nx × (N + 1), node by node), ``U`` (nu × N) and the last solution ``X_sol``, ``U_sol``
-(``templates/c/mpc/mpc.h.j2``), read as views.
+(``templates/c/mpc/mpc.h.j2``), read as views.  Every SQP controller's package holds this C, and
+its ``mpc_condensed_qp`` gives the Python loop its QP (``ncgen_condense.h``: the one condensing);
+where the QP solver is not generated (qpOASES) the package holds only that condensing.
 """
 from __future__ import annotations
 
@@ -33,19 +35,23 @@ SIGNATURES = {
                                          ("const casadi_real *", "X"), ("const casadi_real *", "U"),
                                          ("casadi_real * const *", "out"))),
 }
+#: The entry points of the condensing alone (the package of a QP solved in Python).
+CONDENSING = ("mpc_sizeof", "mpc_condensed_qp")
 #: Return codes of ``mpc_init`` and ``mpc_step`` (``templates/c/runtime/ncgen_mpc.h``).
 OK, FAILED, BAD_INPUT = 0, 1, 2
 
 
 class CompiledLoop:
     """The controller of the package ``name`` in ``library`` for states of ``nx`` and inputs
-    of ``nu`` values on ``N`` intervals: :meth:`start` (``reset``), :meth:`step` (one control
-    step); ``X``, ``U``: the guess, ``X_sol``, ``U_sol``: the last solution (views of the
-    struct, (N + 1) × nx and N × nu)."""
+    of ``nu`` values on ``N`` intervals, with ``n_rows`` general rows in its QP:
+    :meth:`condensed_qp` (every loop's QP data), and with ``controller`` (the QP solved in C)
+    :meth:`start` (``reset``), :meth:`step` (one control step); ``X``, ``U``: the guess,
+    ``X_sol``, ``U_sol``: the last solution (views of the struct, (N + 1) × nx and N × nu)."""
 
-    def __init__(self, library, name: str, nx: int, nu: int, N: int, n_rows: int = 0):
+    def __init__(self, library, name: str, nx: int, nu: int, N: int, n_rows: int = 0, controller: bool = True):
         self._lib = open_library(library)
-        self._fn = {k: bind(self._lib, f"{name}_{k}", s, name=name, addresses=True) for k, s in SIGNATURES.items()}
+        self._fn = {k: bind(self._lib, f"{name}_{k}", s, name=name, addresses=True) for k, s in SIGNATURES.items()
+                    if controller or k in CONDENSING}
         size = int(self._fn["mpc_sizeof"]())
         self._struct = np.zeros(size // 8 + 1)          # 8-byte aligned: doubles, ints and pointers
         self._m = self._struct.ctypes.data
@@ -64,8 +70,8 @@ class CompiledLoop:
 
     def condensed_qp(self, x: np.ndarray, t: np.ndarray, X: np.ndarray, U: np.ndarray) -> list[np.ndarray]:
         """The condensed QP at the guess ``(X, U)`` (float64, contiguous, node by node) from the
-        controller's C (``ncgen_condense.h``): ``mpc_qp_data``'s outputs ``H, g, A, lba, uba, lbx,
-        ubx, Xs, S, J, c, res`` as flat arrays (column-major), overwritten by the next call;
+        controller's C (``ncgen_condense.h``): ``H, g, A, lba, uba, lbx, ubx, Xs, S, J, c, res``
+        (:func:`ncgen.control.mpc.mpc_functions`) as flat arrays (column-major), overwritten by the next call;
         :class:`OptimizationError` when a step along the guess fails.  ``t``: a 1-array."""
         if self._fn["mpc_condensed_qp"](self._m, x.ctypes.data, float(t[0]), X.ctypes.data, U.ctypes.data,
                                         ctypes.addressof(self._qp_out)):
@@ -98,10 +104,10 @@ class CompiledLoop:
 
 def loop_refusal(solver: str, qp_solver: str, problem) -> str | None:
     """Why ``loop="c"`` cannot run this controller, or ``None``: the C controller is the
-    exported package's (qrqp, no reference, no cable rows)."""
+    exported package's (qrqp generated into it; the guess shifted by repeating its last node and
+    input, not from a reference)."""
     for reason, bad in (("solver='fatrop'", solver != "sqp"), (f"qp_solver={qp_solver!r}", qp_solver != "qrqp"),
-                        ("a reference", problem.reference is not None),
-                        ("min_tension", problem.min_tension is not None)):
+                        ("a reference", problem.reference is not None)):
         if bad:
             return reason
     return None

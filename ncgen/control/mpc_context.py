@@ -12,8 +12,9 @@ from ncgen.errors import NcgenError
 
 def controller_context(model, problem, fns, iterations: int | None, rules: dict) -> dict:
     """The templates' context of the controller for the SQP functions ``fns``
-    (:func:`~ncgen.control.mpc.mpc_functions` but ``mpc_qp_data``: the controller condenses
-    ``mpc_qp_blocks`` itself, the QP's rows being the bounded state components); ``iterations``: per control step, or ``None``
+    (:func:`~ncgen.control.mpc.mpc_functions`'s; without ``mpc_qp`` where the QP is solved in
+    Python: the controller's C then only condenses ``mpc_qp_blocks``, the QP's rows being the
+    bounded state components and the cables' pulls); ``iterations``: per control step, or ``None``
     for the controller inside ``nc.MPC(..., loop="c")`` (``in_process``: iterations set at run
     time, no plant); ``rules``: :func:`~ncgen.control.mpc.line_search_rules` (step lengths,
     Armijo fraction, filter margin, feasibility and stationarity thresholds, the step's
@@ -21,14 +22,19 @@ def controller_context(model, problem, fns, iterations: int | None, rules: dict)
     (:func:`~ncgen.codegen.kernels.c_function`: an MX wrapper asks for more than what it calls;
     ``init`` refuses work arrays its functions do not fit in)."""
     from ncgen.codegen.kernels import c_function
+    from ncgen.control.mpc import bounded_states, qp_rows
     nx, nu = 2 * model.nq, model.nu
     u_rest = np.clip(np.zeros(nu), *problem.u_bounds)
     lo_x, hi_x = problem.x_bounds
-    bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))      # the QP's rows (mpc_functions')
+    bounded = bounded_states(problem)
+    taut = problem.min_tension is not None
     generated = [c_function(f, f.name()) for f in fns]     # the work the C functions ask for (a wrapper's, say)
     return {
         "model_name": model.name, "N": problem.N, "h": f"{problem.h:g}", "h_c": c_double(problem.h),
         "iterations": iterations or 0, "in_process": iterations is None, "nx": nx, "nu": nu, "np": model.np,
+        "qp_in_c": any(f.name() == "mpc_qp" for f in fns), "n_rows": qp_rows(problem, nx),
+        "n_pulls": problem.cable_pull.numel_out(0) if taut else 0,
+        "t_min": c_double(problem.min_tension) if taut else "0.0",
         "sz_arg": max(f.sz_arg() for f in generated), "sz_res": max(f.sz_res() for f in generated),
         "sz_iw": max(f.sz_iw() for f in generated), "sz_w": max(f.sz_w() for f in generated),
         "nnz": {f"{f.name()}_{io}{i}": (f.nnz_in(i) if io == "in" else f.nnz_out(i))

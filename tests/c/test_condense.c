@@ -4,8 +4,12 @@
  * X(U) by the recursion x_0 = d_0, x_{k+1} = A_k x_k + B_k u_k + d_{k+1}, the cost
  *     J(U) = sum_k 1/2 x_k' Q_k x_k + g_x,k' x_k  +  sum_{k<N} x_k' M_k u_k + 1/2 u_k' R_k u_k + g_u,k' u_k.
  * X is affine and J quadratic in U, so s = X(0), S's columns X(e_c) - X(0), g = (J(e_c) - J(-e_c)) / 2
- * and H_cd = J(e_c + e_d) - J(e_c) - J(e_d) + J(0) hold exactly up to round-off.  Built and run by
- * tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
+ * and H_cd = J(e_c + e_d) - J(e_c) - J(e_d) + J(0) hold exactly up to round-off.  The cables' rows
+ * (ncgen_condense_taut) against the linearised pulls evaluated on that recursion: with random
+ * P_k, P_a,k, P_b,k, P_u,k, the rows' value (A U - lb)_k must be
+ * P_k + P_a,k x_k(U) + P_b,k x_{k+1}(U) + P_u,k u_k - T_min at U = 0 and every e_c (the rows are
+ * affine in U), the rows above r0 untouched.  Built and run by tests/test_stepper_runtime_c.py
+ * under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
 
 typedef double casadi_real;
@@ -14,6 +18,7 @@ typedef double casadi_real;
 #define NCGEN_MPC_N 4
 #define NXS (NCGEN_MPC_NX * (NCGEN_MPC_N + 1))
 #define NUS (NCGEN_MPC_NU * NCGEN_MPC_N)
+#define NCGEN_MPC_PULLS 3
 #include "ncgen_condense.h"
 
 #define NX NCGEN_MPC_NX
@@ -71,6 +76,43 @@ static double cost(const double *U, double *X) {
   return J;
 }
 
+#define NP NCGEN_MPC_PULLS
+#define R0 2          /* rows before the cables' (the state bounds') */
+#define NR (R0 + NP * NN)
+
+static double P[NP * NN], Pa[NP * NX * NN], Pb[NP * NX * NN], Pu[NP * NU * NN];
+
+/* The cables' rows on the blocks: the worst error of A U - lb against the pulls by the recursion. */
+static double taut_rows(const double *S, const double *s) {
+  const double T_min = 0.7;
+  double A_t[NR * NUS], lb[NR], U[NUS], X[NXS], worst = 0.0;
+  int i, j, k, c;
+  for (i = 0; i < NP * NN; ++i) P[i] = uniform();
+  for (i = 0; i < NP * NX * NN; ++i) Pa[i] = uniform(), Pb[i] = uniform();
+  for (i = 0; i < NP * NU * NN; ++i) Pu[i] = uniform();
+  for (i = 0; i < NR * NUS; ++i) A_t[i] = 42.0;
+  lb[0] = lb[1] = 42.0;
+  ncgen_condense_taut(P, Pa, Pb, Pu, T_min, S, s, NR, R0, A_t, lb);
+  for (c = 0; c < NUS; ++c) worst = fmax(worst, fabs(A_t[c * NR] - 42.0) + fabs(A_t[1 + c * NR] - 42.0));
+  worst = fmax(worst, fabs(lb[0] - 42.0) + fabs(lb[1] - 42.0));
+  for (c = -1; c < NUS; ++c) {                     /* U = 0, then U = e_c */
+    memset(U, 0, sizeof U);
+    if (c >= 0) U[c] = 1.0;
+    cost(U, X);
+    for (k = 0; k < NN; ++k)
+      for (i = 0; i < NP; ++i) {
+        const int row = R0 + k * NP + i;
+        double want = P[k * NP + i] - T_min, got = -lb[row];
+        for (j = 0; j < NX; ++j)
+          want += Pa[(k * NX + j) * NP + i] * X[k * NX + j] + Pb[(k * NX + j) * NP + i] * X[(k + 1) * NX + j];
+        for (j = 0; j < NU; ++j) want += Pu[(k * NU + j) * NP + i] * U[k * NU + j];
+        for (j = 0; j < NUS; ++j) got += A_t[row + NR * j] * U[j];
+        worst = fmax(worst, fabs(got - want));
+      }
+  }
+  return worst;
+}
+
 int main(void) {
   double S[NXS * NUS], s[NXS], H[NUS * NUS], g[NUS], T[NX * NUS];
   double U[NUS], X0[NXS], X[NXS], J0, Jc[NUS];
@@ -108,6 +150,8 @@ int main(void) {
     CHECK(worst_g < 1e-11, "trial %d: g against the cost's differences: %.3g", trial, worst_g);
     CHECK(worst_H < 1e-11, "trial %d: H against the cost's second differences: %.3g", trial, worst_H);
     CHECK(asym == 0.0, "trial %d: H not symmetric: %.3g", trial, asym);
+    worst_S = taut_rows(S, s);
+    CHECK(worst_S < 1e-12, "trial %d: the cables' rows against the pulls on the recursion: %.3g", trial, worst_S);
   }
   return report("test_condense");
 }

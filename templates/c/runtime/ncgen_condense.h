@@ -1,6 +1,7 @@
-/* ncgen_condense.h: the SQP controller's condensed QP (ncgen.control.mpc.mpc_functions'
- * mpc_qp_data) from the blocks of mpc_qp_blocks, in dense loops.  Included by <name>_mpc.c after
- * it defines NCGEN_MPC_NX, NCGEN_MPC_NU, NCGEN_MPC_N (states, inputs, intervals) and NXS, NUS.
+/* ncgen_condense.h: the SQP controller's condensed QP (ncgen.control.mpc) from the blocks of
+ * mpc_qp_blocks, in dense loops: the one implementation of the condensing, for the exported
+ * package, nc.MPC(loop="c") and nc.MPC's Python loop.  Included by <name>_mpc.c after it defines
+ * NCGEN_MPC_NX, NCGEN_MPC_NU, NCGEN_MPC_N (states, inputs, intervals) and NXS, NUS.
  *
  * Arrays are column-major.  The blocks, side by side: A_k (NX x NX) and B_k (NX x NU) of the
  * step's Jacobians for k < N; d (NX x (N + 1)): d_0 = x - X_0, d_{k+1} = the shooting gap of
@@ -94,3 +95,41 @@ static void ncgen_condense(const ncgen_qp_blocks* b, casadi_real* S, casadi_real
     for (c2 = 0; c2 < NUS; ++c2)
         for (c = c2 + 1; c < NUS; ++c) H[c2 + c * NUS] = H[c + c2 * NUS];
 }
+
+#ifdef NCGEN_MPC_PULLS
+/* The cables' rows of the QP (the path constraint P >= T_min linearised, ncgen.control.mpc_problem),
+ * defined where the package defines NCGEN_MPC_PULLS (np, the pulls per interval, > 0):
+ * for interval k its np pulls P_k (np x N: column k), their Jacobians P_a,k, P_b,k in x_k, x_{k+1}
+ * (np x NX blocks side by side) and P_u,k in u_k (np x NU blocks), on the condensed prediction
+ * dx_j = S_j dU + s_j (ncgen_condense's S, s):
+ *     A_k = P_a,k S_k + P_b,k S_{k+1} + P_u,k E_k,   lb_k = T_min - P_k - P_a,k s_k - P_b,k s_{k+1},
+ * written into the rows r0 + k np .. of A (n_rows x NUS, column-major) and lb. */
+static void ncgen_condense_taut(const casadi_real* P, const casadi_real* Pa, const casadi_real* Pb,
+                                const casadi_real* Pu, casadi_real T_min, const casadi_real* S, const casadi_real* s,
+                                int n_rows, int r0, casadi_real* A, casadi_real* lb) {
+    const int nx = NCGEN_MPC_NX, nu = NCGEN_MPC_NU, np = NCGEN_MPC_PULLS;
+    int i, j, k, c;
+    for (k = 0; k < NCGEN_MPC_N; ++k)
+        for (i = 0; i < np; ++i) {
+            const casadi_real *a = Pa + k * nx * np + i, *b = Pb + k * nx * np + i;   /* row i, stride np */
+            const int row = r0 + k * np + i;
+            casadi_real r = T_min - P[k * np + i];
+            for (j = 0; j < nx; ++j) r -= a[j * np] * s[k * nx + j] + b[j * np] * s[(k + 1) * nx + j];
+            lb[row] = r;
+            for (c = 0; c < NUS; ++c) {              /* S_k's nonzero columns: c < k nu; S_{k+1}'s: c < (k + 1) nu */
+                const casadi_real *S_k = S + c * NXS + k * nx, *S_k1 = S_k + nx;
+                casadi_real v = 0.0;
+                if (c >= (k + 1) * nu) {
+                    A[row + n_rows * c] = 0.0;
+                    continue;
+                }
+                for (j = 0; j < nx; ++j) v += b[j * np] * S_k1[j];
+                if (c < k * nu)
+                    for (j = 0; j < nx; ++j) v += a[j * np] * S_k[j];
+                else
+                    v += Pu[c * np + i];
+                A[row + n_rows * c] = v;
+            }
+        }
+}
+#endif
