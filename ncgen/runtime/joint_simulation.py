@@ -46,7 +46,7 @@ from ncgen.model.data import model_data
 from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
 from ncgen.progress import enabled as progress_enabled
 from ncgen.runtime.simulation_progress import Progress
-from ncgen.runtime.trajectory import Trajectory, once
+from ncgen.runtime.trajectory import Derived, Trajectory, once
 from ncgen.runtime.tree_library import TableJointLoop, input_efforts
 
 #: The run is cut into at most this many calls of the C loop when a progress bar may be drawn
@@ -521,17 +521,15 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring); ``X``
     and ``W`` are the run's own arrays, which the lazy outputs keep (``traj.qj``, ``traj.vj``
     too: copies made when first read, so editing them changes nothing else)."""
-    js = model.joint_space
-    n = len(t)
+    nqj, n = model.joint_space.nq, len(t)
     W = W[:n]
     P = once(lambda: np.repeat(np.asarray(p, float)[:, None], n, axis=1))
-    natural = once(lambda: [np.array(y).T for y in loop.mapped("tree", n)(X[:, :js.nq].T, X[:, js.nq:].T)])
+    natural = once(lambda: [np.array(y).T for y in loop.mapped("tree", n)(X[:, :nqj].T, X[:, nqj:].T)])
     applied = once(lambda: np.array(loop.mapped("ode", n)(t[None, :], X.T, W.T if model.nu else np.zeros((0, n)),
                                                             P())[2]).T.reshape(n, model.nu))
-    traj = Trajectory.from_states(
-        model, t, lambda: natural()[0], lambda: natural()[1],
-        lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,
-                                                 P())[1]).T.reshape(n, model.nc),
-        applied, p, info)
-    traj.qj, traj.vj = (lambda: X[:, :js.nq].copy()), (lambda: X[:, js.nq:].copy())
-    return traj
+    lam = lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,  # noqa: E731
+                                                   P())[1]).T.reshape(n, model.nc)
+    derived = Derived(model, t, lambda: natural()[0], lambda: natural()[1], p)
+    arrays = {"t": t, "lam": lam, "u": applied, "p": np.asarray(p, float), "qj": lambda: X[:, :nqj].copy(),
+              "vj": lambda: X[:, nqj:].copy()}
+    return Trajectory.of_run(model, derived, arrays, info)
