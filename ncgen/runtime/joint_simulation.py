@@ -309,16 +309,15 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     if hold == "linear" and feedback is not None:
         raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
                          "interval (zoh); use hold='zoh'")
-    js = model.joint_space
     build_start = time.perf_counter()
     prepared = prepared_run(model, controller, opts, options, len(t) - 1)
     loop, build_time = prepared.loop, time.perf_counter() - build_start
-    n, nqj = len(t), js.nq
-    X = np.zeros((n, nqj + js.nv))
-    X[0, :nqj], X[0, nqj:] = run.joint_state or js.state(model, run.q, run.v)  # consistent: start_state made it so
+    (nqj, nvj, nu), n = prepared.sizes, len(t)
+    X = np.zeros((n, nqj + nvj))
+    X[0, :nqj], X[0, nqj:] = run.joint_state or model.joint_space.state(model, run.q, run.v)  # consistent: start_state
     U = np.ascontiguousarray(run.U, dtype=float)
-    W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and model.nu else None
-    varying = model.nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
+    W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and nu else None
+    varying = nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
     options = run_options(options, varying)
     integrator = prepared.integrator
     start = time.perf_counter()
@@ -371,17 +370,18 @@ KEPT_RUNS = 16
 class PreparedRun:
     """What a joint-space run derives from its options, output count, controller and
     compiler but not from its start: the loop (:func:`joint_loop`) on the kernels
-    :func:`choose_kernels` chose, the integrator's name and the run's ``info`` without its
-    per-run entries (the RK4 step ``h``, the controller's and feedback's descriptions, the
-    counts and times: set by the run)."""
+    :func:`choose_kernels` chose, the integrator's name, the sizes ``(nq_j, nv_j, nu)`` and
+    the run's ``info`` without its per-run entries (the RK4 step ``h``, the controller's and
+    feedback's descriptions, the counts and times: set by the run)."""
 
-    __slots__ = ("controller", "opts", "options", "loop", "integrator", "info")
+    __slots__ = ("controller", "opts", "options", "loop", "integrator", "info", "sizes")
 
     def __init__(self, model, controller, opts: JointLoopOptions, options: JointOptions, n_out: int):
         choice = choose_kernels(model, n_out, controller, opts.joint_dynamics, opts.kernels)
         self.controller, self.opts, self.options = controller, opts, options
         self.loop = joint_loop(model, controller, opts.joint_dynamics, kernels=choice.backend)
         self.integrator = integrator = integrator_name(options)
+        self.sizes = (model.joint_space.nq, model.joint_space.nv, model.nu)
         steps = {"rtol": options.rtol, "atol": options.atol} if integrator == "dopri5" else \
             {"h": None, "substeps": options.substeps}
         self.info = {"method": "joint", "integrator": integrator, **steps, "hold": opts.hold,
@@ -447,6 +447,8 @@ def _integrate(model, loop, options: JointOptions, run: Run, X: np.ndarray, W: n
     status, k, failed = 0, 0, None
     chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS)) if shown else n - 1
     try:
+        if feedback is None and chunk == n - 1:     # one call over the whole grid (W, S: made contiguous)
+            status, k = loop.run(options, np.ascontiguousarray(t), X, W, S, p, stats)
         while k < n - 1 and status == 0:
             m = min(chunk, n - 1 - k)
             if feedback is not None:

@@ -238,11 +238,11 @@ _PLAIN = (float, int)
 def _kept_plan(model, t_end, dt, options, shortcuts: dict) -> Plan | None:
     """The :class:`Plan` of a call without inputs, parameters or ``t0`` that runs the joint
     loop, kept per model, ``t_end``, ``dt`` (plain numbers), options (the object), option
-    keywords (values and types), ``model.t0`` and ``$NCGEN_MAX_BYTES`` (the grid's limit); None
+    keywords (values and types) and ``$NCGEN_MAX_BYTES`` (the grid's limit; the model is constant); None
     for any other call (unhashable keywords, another method), which makes its plan afresh."""
     if type(t_end) not in _PLAIN or type(dt) not in _PLAIN:
         return None
-    key = (t_end, type(t_end), dt, type(dt), id(options), model.t0, getenv_key("NCGEN_MAX_BYTES"),
+    key = (t_end, type(t_end), dt, type(dt), id(options), getenv_key("NCGEN_MAX_BYTES"),
            *shortcuts.items(), *map(type, shortcuts.values()))
     plans = model_data(model).simulate_plans
     try:
