@@ -46,7 +46,7 @@ from ncgen.model.data import model_data
 from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
 from ncgen.progress import enabled as progress_enabled
 from ncgen.runtime.simulation_progress import Progress
-from ncgen.runtime.trajectory import Derived, Trajectory, once
+from ncgen.runtime.trajectory import Derived, Trajectory
 from ncgen.runtime.tree_library import TableJointLoop, input_efforts
 
 #: The run is cut into at most this many calls of the C loop when a progress bar may be drawn
@@ -398,8 +398,9 @@ def prepared_run(model, controller, opts: JointLoopOptions, options: JointOption
     controller every loop the choice weighs, is loaded (else made on every call, as
     :func:`choose_kernels` weighs what is compiled)."""
     data = model_data(model)
-    key = (id(opts), id(options), n_out, id(controller), getenv_key("CC"), getenv_key("PATH"),
-           *_loaded(data.joint_loops))
+    loops = data.joint_loops
+    key = (id(opts), id(options), n_out, id(controller), getenv_key("CC"), getenv_key("PATH"), _OWN_LOOP in loops,
+           loops.get("tables") is not None)                        # (_loaded, inline)
     hit = data.prepared_runs.get(key)
     if hit is not None and hit.controller is controller and hit.opts is opts and hit.options is options:
         return hit
@@ -411,9 +412,13 @@ def prepared_run(model, controller, opts: JointLoopOptions, options: JointOption
     return prepared
 
 
+#: The key of the model's own loop (no controller, no joint dynamics) in ``joint_loops``.
+_OWN_LOOP = (id(None), False, None)
+
+
 def _loaded(loops: dict) -> tuple[bool, bool]:
     """Whether the model's own loop (no controller) and the tables' loop are loaded."""
-    return (id(None), False, None) in loops, loops.get("tables") is not None
+    return _OWN_LOOP in loops, loops.get("tables") is not None
 
 
 def _choice_settled(model, controller, opts: JointLoopOptions, loops: dict) -> bool:
@@ -523,15 +528,56 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring); ``X``
     and ``W`` are the run's own arrays, which the lazy outputs keep (``traj.qj``, ``traj.vj``
     too: copies made when first read, so editing them changes nothing else)."""
-    nqj, n = model.joint_space.nq, len(t)
-    W = W[:n]
-    P = once(lambda: np.repeat(np.asarray(p, float)[:, None], n, axis=1))
-    natural = once(lambda: [np.array(y).T for y in loop.mapped("tree", n)(X[:, :nqj].T, X[:, nqj:].T)])
-    applied = once(lambda: np.array(loop.mapped("ode", n)(t[None, :], X.T, W.T if model.nu else np.zeros((0, n)),
-                                                            P())[2]).T.reshape(n, model.nu))
-    lam = lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,  # noqa: E731
-                                                   P())[1]).T.reshape(n, model.nc)
-    derived = Derived(model, t, lambda: natural()[0], lambda: natural()[1], p)
-    arrays = {"t": t, "lam": lam, "u": applied, "p": np.asarray(p, float), "qj": lambda: X[:, :nqj].copy(),
-              "vj": lambda: X[:, nqj:].copy()}
+    outputs = _JointOutputs(model, loop, t, X, W[:len(t)], p)
+    derived = Derived(model, t, outputs.q, outputs.v, p)
+    arrays = {"t": t, "lam": outputs.lam, "u": outputs.applied, "p": np.asarray(p, float), "qj": outputs.qj,
+              "vj": outputs.vj}
     return Trajectory.of_run(model, derived, arrays, info)
+
+
+class _JointOutputs:
+    """The outputs of a joint run derived from its joint states ``X`` (rows at the times ``t``)
+    and applied samples ``W``, each evaluated when first asked for: the natural state (the
+    tree function, mapped), the applied inputs (the ODE's third output), the multipliers
+    (``accel`` at the natural state) and the joint states (copies)."""
+
+    __slots__ = ("model", "loop", "t", "X", "W", "p", "_natural", "_applied", "_P")
+
+    def __init__(self, model, loop, t, X, W, p):
+        self.model, self.loop, self.t, self.X, self.W, self.p = model, loop, t, X, W, p
+        self._natural = self._applied = self._P = None
+
+    def P(self) -> np.ndarray:
+        if self._P is None:
+            self._P = np.repeat(np.asarray(self.p, float)[:, None], len(self.t), axis=1)
+        return self._P
+
+    def natural(self) -> list:
+        if self._natural is None:
+            X, nqj = self.X, self.model.joint_space.nq
+            self._natural = [np.array(y).T for y in self.loop.mapped("tree", len(self.t))(X[:, :nqj].T, X[:, nqj:].T)]
+        return self._natural
+
+    def q(self) -> np.ndarray:
+        return self.natural()[0]
+
+    def v(self) -> np.ndarray:
+        return self.natural()[1]
+
+    def applied(self) -> np.ndarray:
+        if self._applied is None:
+            m, n, t = self.model, len(self.t), self.t
+            self._applied = np.array(self.loop.mapped("ode", n)(t[None, :], self.X.T, self.W.T if m.nu else
+                                                                np.zeros((0, n)), self.P())[2]).T.reshape(n, m.nu)
+        return self._applied
+
+    def lam(self) -> np.ndarray:
+        m, n, (q, v) = self.model, len(self.t), self.natural()
+        return np.array(self.loop.mapped("accel", n)(self.t[None, :], q.T, v.T, self.applied().T,
+                                                     self.P())[1]).T.reshape(n, m.nc)
+
+    def qj(self) -> np.ndarray:
+        return self.X[:, :self.model.joint_space.nq].copy()
+
+    def vj(self) -> np.ndarray:
+        return self.X[:, self.model.joint_space.nq:].copy()

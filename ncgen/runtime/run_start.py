@@ -44,7 +44,8 @@ def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | No
 
 def start_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None, joint: bool = False):
     """``(q, v, joint state)``: :func:`initial_state` and, when ``joint`` and the given state
-    holds as it is (one C call checks it and maps it), its ``(q_j, v_j)``, else None."""
+    holds as it is (one C call checks it and maps it), its ``(q_j, v_j)`` (then ``q``, ``v``
+    are the arrays given, not copies), else None."""
     js = model.joint_space
     at_model = t0 == model.t0 and (model.np == 0 or np.array_equal(p, model.p0))
     if q0 is None and v0 is None and at_model:
@@ -53,8 +54,8 @@ def start_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None
         q, v = (model.q0 if q0 is None else q0), (model.v0 if v0 is None else v0)
         if joint:                           # finite, in range, consistent, and its joint state: one C call
             state = js._checked_state(model, q, v, t0, p)
-            if state is not None:
-                return q.copy(), v.copy(), state
+            if state is not None:           # (q, v not copied: the joint run reads its joint state only)
+                return q, v, state
         elif js._holds(model, q, v, t0, p):  # finite, in range, consistent: one C call
             return q.copy(), v.copy(), None
     q = model.q0 if q0 is None else as_vector(q0, model.nq, "q0")

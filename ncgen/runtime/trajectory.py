@@ -173,17 +173,6 @@ class _Names:
         return value
 
 
-def once(f):
-    """``f()`` computed at the first call and kept (several arrays from one evaluation)."""
-    kept = []
-
-    def value():
-        if not kept:
-            kept.append(f())
-        return kept[0]
-    return value
-
-
 _FLOAT64 = np.dtype(np.float64)
 
 
