@@ -46,7 +46,7 @@ from ncgen.model.data import model_data
 from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
 from ncgen.progress import enabled as progress_enabled
 from ncgen.runtime.simulation_progress import Progress
-from ncgen.runtime.trajectory import Derived, Trajectory
+from ncgen.runtime.trajectory import Derived, Trajectory, output_names
 from ncgen.runtime.tree_library import TableJointLoop, input_efforts
 
 #: The run is cut into at most this many calls of the C loop when a progress bar may be drawn
@@ -328,7 +328,7 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     if integrator == "rk4" and (failed is not None or status not in (0, INTERRUPTED)):
         trusted, why = _trusted_rk4_rows(model, loop, t[:k + 1], X[:k + 1], W, S, p, options)
         info["complete"] = False
-    traj = _trajectory(model, loop, t[:trusted], X[:trusted], W[:trusted], p, info)
+    traj = _trajectory(model, loop, t[:trusted], X[:trusted], W[:trusted], p, info, prepared.names)
     if failed is not None:
         cause = failed.__cause__
         if why:
@@ -370,18 +370,18 @@ KEPT_RUNS = 16
 class PreparedRun:
     """What a joint-space run derives from its options, output count, controller and
     compiler but not from its start: the loop (:func:`joint_loop`) on the kernels
-    :func:`choose_kernels` chose, the integrator's name, the sizes ``(nq_j, nv_j, nu)`` and
-    the run's ``info`` without its per-run entries (the RK4 step ``h``, the controller's and
+    :func:`choose_kernels` chose, the integrator's name, the sizes ``(nq_j, nv_j, nu)``, the
+    trajectory's names and the run's ``info`` without its per-run entries (the RK4 step ``h``, the controller's and
     feedback's descriptions, the counts and times: set by the run)."""
 
-    __slots__ = ("controller", "opts", "options", "loop", "integrator", "info", "sizes")
+    __slots__ = ("controller", "opts", "options", "loop", "integrator", "info", "sizes", "names")
 
     def __init__(self, model, controller, opts: JointLoopOptions, options: JointOptions, n_out: int):
         choice = choose_kernels(model, n_out, controller, opts.joint_dynamics, opts.kernels)
         self.controller, self.opts, self.options = controller, opts, options
         self.loop = joint_loop(model, controller, opts.joint_dynamics, kernels=choice.backend)
         self.integrator = integrator = integrator_name(options)
-        self.sizes = (model.joint_space.nq, model.joint_space.nv, model.nu)
+        self.sizes, self.names = (model.joint_space.nq, model.joint_space.nv, model.nu), output_names(model)
         steps = {"rtol": options.rtol, "atol": options.atol} if integrator == "dopri5" else \
             {"h": None, "substeps": options.substeps}
         self.info = {"method": "joint", "integrator": integrator, **steps, "hold": opts.hold,
@@ -524,15 +524,16 @@ def _feedback(model, feedback, t: float, x: np.ndarray, p) -> np.ndarray:
     return call_feedback(u, t, *args, nu=model.nu, what=kind)
 
 
-def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
+def _trajectory(model, loop: JointLoop, t, X, W, p, info, names) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring); ``X``
     and ``W`` are the run's own arrays, which the lazy outputs keep (``traj.qj``, ``traj.vj``
-    too: copies made when first read, so editing them changes nothing else)."""
+    too: copies made when first read, so editing them changes nothing else); ``names``: the
+    model's :func:`~ncgen.runtime.trajectory.output_names`."""
     outputs = _JointOutputs(model, loop, t, X, W[:len(t)], p)
     derived = Derived(model, t, outputs.q, outputs.v, p)
     arrays = {"t": t, "lam": outputs.lam, "u": outputs.applied, "p": np.asarray(p, float), "qj": outputs.qj,
               "vj": outputs.vj}
-    return Trajectory.of_run(model, derived, arrays, info)
+    return Trajectory.of_run(model, derived, arrays, info, names)
 
 
 class _JointOutputs:

@@ -176,10 +176,13 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     if plan is None:
         plan = Plan(model, t_end, dt, t0, options, shortcuts)
     opts, t0, t = plan.opts, plan.t0, plan.t.copy()
-    pv = parameter_values(p, model)
-    controller = u if isinstance(u, Controller) else None
-    kind = feedback_kind(u) if controller is None else None
-    feedback = (kind, u) if kind in ("natural", "joint") else None
+    pv = model.p0.copy() if p is None else parameter_values(p, model)
+    if u is None:
+        controller = feedback = None
+    else:
+        controller = u if isinstance(u, Controller) else None
+        kind = feedback_kind(u) if controller is None else None
+        feedback = (kind, u) if kind in ("natural", "joint") else None
     if u is None and plan.U is not None:
         U, columns = plan.U, plan.columns
     else:

@@ -258,15 +258,16 @@ class Trajectory:
         return cls.of_run(model, derived, arrays, dict(info))
 
     @classmethod
-    def of_run(cls, model, derived: Derived, arrays: dict, info: dict) -> "Trajectory":
+    def of_run(cls, model, derived: Derived, arrays: dict, info: dict, names: dict | None = None) -> "Trajectory":
         """A run's trajectory made directly (a short run's fixed cost): ``arrays`` (``t`` and
         ``p`` as float arrays, the others float arrays or functions computing them; the
         arrays not given are ``derived``'s) and ``info`` become the trajectory's own (not
-        copied: the caller's fresh objects)."""
+        copied: the caller's fresh objects); ``names``: :func:`output_names` of ``model``
+        (found when None)."""
         traj = cls.__new__(cls)
         d = traj.__dict__
         d["model"], d["model_name"], d["_names"], d["_derived"], d["_arrays"], d["info"] = \
-            model, model.name, output_names(model), derived, arrays, info
+            model, model.name, output_names(model) if names is None else names, derived, arrays, info
         return traj
 
     def head(self, n: int) -> "Trajectory":
