@@ -314,7 +314,7 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     loop, build_time = prepared.loop, time.perf_counter() - build_start
     (nqj, nvj, nu), n = prepared.sizes, len(t)
     X = np.zeros((n, nqj + nvj))
-    X[0, :nqj], X[0, nqj:] = run.joint_state or model.joint_space.state(model, run.q, run.v)  # consistent: start_state
+    np.concatenate(run.joint_state or model.joint_space.state(model, run.q, run.v), out=X[0])  # consistent: start_state
     U = np.ascontiguousarray(run.U, dtype=float)
     W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and nu else None
     varying = nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
@@ -328,7 +328,8 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     if integrator == "rk4" and (failed is not None or status not in (0, INTERRUPTED)):
         trusted, why = _trusted_rk4_rows(model, loop, t[:k + 1], X[:k + 1], W, S, p, options)
         info["complete"] = False
-    traj = _trajectory(model, loop, t[:trusted], X[:trusted], W[:trusted], p, info, prepared.names)
+    traj = _trajectory(model, loop, *((t, X, W) if trusted == n else (t[:trusted], X[:trusted], W[:trusted])), p, info,
+                       prepared.names)
     if failed is not None:
         cause = failed.__cause__
         if why:
@@ -529,7 +530,7 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info, names) -> Trajectory:
     and ``W`` are the run's own arrays, which the lazy outputs keep (``traj.qj``, ``traj.vj``
     too: copies made when first read, so editing them changes nothing else); ``names``: the
     model's :func:`~ncgen.runtime.trajectory.output_names`."""
-    outputs = _JointOutputs(model, loop, t, X, W[:len(t)], p)
+    outputs = _JointOutputs(model, loop, t, X, W if len(W) == len(t) else W[:len(t)], p)
     derived = Derived(model, t, outputs.q, outputs.v, p)
     arrays = {"t": t, "lam": outputs.lam, "u": outputs.applied, "p": np.asarray(p, float), "qj": outputs.qj,
               "vj": outputs.vj}
