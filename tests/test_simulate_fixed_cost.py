@@ -499,3 +499,20 @@ def test_a_kept_plan_is_reused_and_a_changed_argument_option_t0_or_limit_makes_a
     nc.simulate(model, 0.2, 0.05, p=model.p0, q0=q0, v0=v0, method="joint")
     nc.simulate(model, 0.2, 0.05, t0=0.0, q0=q0, v0=v0, method="joint")
     assert plans == {}
+
+
+def test_a_float64_start_of_another_dtype_instance_takes_the_fast_start(chain, monkeypatch):
+    """A start given as float64 arrays whose dtype is an equal but distinct instance (as NumPy
+    makes for some results, e.g. ``newbyteorder("=")``) takes the fast start like any other
+    (no ``as_vector``: counted), with a bit-equal run."""
+    import ncgen.runtime.run_start as run_start
+
+    model, q0, v0 = chain
+    other = np.dtype(np.float64).newbyteorder("=")
+    assert other is not np.dtype(np.float64)
+    q, v = q0.astype(other), v0.astype(other)
+    calls: dict = {}
+    _count(monkeypatch, run_start, "as_vector", calls)
+    got = nc.simulate(model, 0.05, 0.05, q0=q, v0=v, method="joint")
+    assert calls == {}
+    np.testing.assert_array_equal(got.qj, nc.simulate(model, 0.05, 0.05, q0=q0, v0=v0, method="joint").qj)

@@ -50,8 +50,8 @@ def start_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None
     at_model = t0 == model.t0 and (model.p0.size == 0 or np.array_equal(p, model.p0))
     if q0 is None and v0 is None and at_model:
         return model.q0.copy(), model.v0.copy(), None
-    if at_model and (q0 is None or type(q0) is _ARRAY and q0.dtype is _FLOAT64 and q0.shape == shape) and \
-            (v0 is None or type(v0) is _ARRAY and v0.dtype is _FLOAT64 and v0.shape == shape):
+    if at_model and (q0 is None or type(q0) is _ARRAY and q0.dtype == _FLOAT64 and q0.shape == shape) and \
+            (v0 is None or type(v0) is _ARRAY and v0.dtype == _FLOAT64 and v0.shape == shape):
         # (None or float64 arrays of nq values, which _holds checks; anything else goes through as_vector,
         # whose messages name the argument)
         q, v = (model.q0 if q0 is None else q0), (model.v0 if v0 is None else v0)
@@ -75,7 +75,7 @@ def start_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None
     return state.q0, state.v0, None
 
 
-_ARRAY, _FLOAT64 = np.ndarray, np.dtype(np.float64)
+_ARRAY, _FLOAT64 = np.ndarray, np.float64
 
 
 def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:
