@@ -442,3 +442,77 @@ def test_the_joint_states_are_copies_made_when_read_and_editing_them_changes_not
     np.testing.assert_allclose(edited.q[-1], q, rtol=0, atol=1e-12)
     np.testing.assert_allclose(edited.v[-1], v, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(pickle.loads(pickle.dumps(edited)).vj, reference.vj - 2.0)
+
+
+def test_a_kept_plan_is_reused_and_a_changed_argument_option_t0_or_limit_makes_a_new_one(monkeypatch):
+    """What ``simulate`` derives from its arguments in the call without ``u``, ``p`` and ``t0``
+    (:class:`~ncgen.runtime.simulation.Plan`: options, method, integrator, grid, zero inputs) is
+    kept per model and arguments: a repeated call makes none (the options are not resolved
+    again: counted), and each case — repeated, another ``t_end``, ``dt``, tolerance, integrator,
+    options object, ``t_end`` as an int — equals, bit for bit and in its
+    ``info``, the same run with every plan made afresh; a lowered ``$NCGEN_MAX_BYTES`` still
+    refuses a kept grid; the plan's grid stays unchanged when a run's ``t`` is edited, its
+    inputs are the run's own; a run with ``p`` or ``t0`` given keeps no plan."""
+    import ncgen.runtime.simulation as simulation
+
+    model = spatial_chain()
+    q0, v0 = model.from_joint_space(np.array([0.3, -0.7, 1.1]), np.array([1.5, -0.4, 2.0]))
+    plans = js_module.model_data(model).simulate_plans
+    strict = nc.SimulationOptions(method="joint", rtol=1e-9, atol=1e-11)
+    cases = [(0.2, 0.05, None, dict(rtol=1e-6, atol=1e-6)), (0.2, 0.05, None, dict(rtol=1e-6, atol=1e-6)),
+             (0.3, 0.05, None, dict(rtol=1e-6, atol=1e-6)), (0.2, 0.04, None, dict(rtol=1e-6, atol=1e-6)),
+             (0.2, 0.05, None, dict(rtol=1e-9, atol=1e-11)), (0.2, 0.05, None, dict(integrator="rk4", substeps=4)),
+             (0.2, 0.05, strict, {}), (1, 0.25, None, dict(rtol=1e-6, atol=1e-6)), (1.0, 0.25, None, dict(rtol=1e-6, atol=1e-6))]
+    resolved = [0]
+    resolve = nc.SimulationOptions.resolve.__func__
+
+    def counted(cls, *args, **kwargs):
+        resolved[0] += 1
+        return resolve(cls, *args, **kwargs)
+    monkeypatch.setattr(nc.SimulationOptions, "resolve", classmethod(counted))
+    runs = []
+    for k, (t_end, dt, options, keywords) in enumerate(cases):
+        before = resolved[0]
+        runs.append(nc.simulate(model, t_end, dt, q0=q0, v0=v0, options=options, **{"method": "joint", **keywords}))
+        assert resolved[0] == before + (k != 1)        # the repeated case: none
+    assert len(plans) == len(cases) - 1
+    runs[0].t[:] = -1.0
+    monkeypatch.setattr(simulation, "_kept_plan", lambda *args: None)
+    for (t_end, dt, options, keywords), run in zip(cases, runs):
+        ref = nc.simulate(model, t_end, dt, q0=q0, v0=v0, options=options, **{"method": "joint", **keywords})
+        np.testing.assert_array_equal(run.qj, ref.qj)
+        np.testing.assert_array_equal(run.lam, ref.lam)
+        assert run is runs[0] or (np.array_equal(run.t, ref.t) and np.array_equal(run.u, ref.u))
+        drop = ("build_time", "wall_time")
+        assert {k: v for k, v in run.info.items() if k not in drop} == \
+            {k: v for k, v in ref.info.items() if k not in drop}
+    monkeypatch.undo()
+    again = nc.simulate(model, 0.2, 0.05, q0=q0, v0=v0, method="joint", rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(again.t, np.arange(5) * 0.05)
+    assert not again.u.any() and again.u.flags.writeable
+    np.testing.assert_array_equal(again.qj, runs[1].qj)
+    monkeypatch.setenv("NCGEN_MAX_BYTES", "100")
+    with pytest.raises(nc.NcgenError, match="output grid t0 = 0"):
+        nc.simulate(model, 0.2, 0.05, q0=q0, v0=v0, method="joint", rtol=1e-6, atol=1e-6)
+    monkeypatch.delenv("NCGEN_MAX_BYTES")
+    plans.clear()
+    nc.simulate(model, 0.2, 0.05, p=model.p0, q0=q0, v0=v0, method="joint")
+    nc.simulate(model, 0.2, 0.05, t0=0.0, q0=q0, v0=v0, method="joint")
+    assert plans == {}
+
+
+def test_a_float64_start_of_another_dtype_instance_takes_the_fast_start(chain, monkeypatch):
+    """A start given as float64 arrays whose dtype is an equal but distinct instance (as NumPy
+    makes for some results, e.g. ``newbyteorder("=")``) takes the fast start like any other
+    (no ``as_vector``: counted), with a bit-equal run."""
+    import ncgen.runtime.run_start as run_start
+
+    model, q0, v0 = chain
+    other = np.dtype(np.float64).newbyteorder("=")
+    assert other is not np.dtype(np.float64)
+    q, v = q0.astype(other), v0.astype(other)
+    calls: dict = {}
+    _count(monkeypatch, run_start, "as_vector", calls)
+    got = nc.simulate(model, 0.05, 0.05, q0=q, v0=v, method="joint")
+    assert calls == {}
+    np.testing.assert_array_equal(got.qj, nc.simulate(model, 0.05, 0.05, q0=q0, v0=v0, method="joint").qj)

@@ -93,6 +93,10 @@ class ModelData:
     #: template; :func:`ncgen.runtime.joint_simulation.prepared_run`), up to
     #: :data:`~ncgen.runtime.joint_simulation.KEPT_RUNS`.
     prepared_runs: dict = field(default_factory=dict)
+    #: ``{key: Plan}``: what ``simulate`` derives from its arguments in the call without inputs,
+    #: parameters or ``t0`` (:func:`ncgen.runtime.simulation.simulate`), up to
+    #: :data:`~ncgen.runtime.simulation.KEPT_PLANS`.
+    simulate_plans: dict = field(default_factory=dict)
     #: The lists of names of the model's trajectories (:func:`ncgen.runtime.trajectory.output_names`).
     output_names: dict | None = None
     #: The model's constraints and accelerations with its nonholonomic elements

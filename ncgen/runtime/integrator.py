@@ -22,8 +22,7 @@ elements (``RollingIntegrator`` in :mod:`ncgen.runtime.rolling_integrator`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable, ClassVar, Protocol
+from typing import Callable, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
@@ -33,9 +32,8 @@ from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.trajectory import Trajectory
 
 
-@dataclass(frozen=True)
-class Run:
-    """One run's data, checked and consistent.
+class Run(NamedTuple):
+    """One run's data, checked and consistent (a named tuple: made on every ``simulate`` call).
 
     ``t``: the output grid (s); ``U``: open-loop input samples on it, ``(len(t), nu)``;
     ``columns``: ``U`` held as ``SimulationOptions.hold`` says (IDAS's form); ``p``: parameter

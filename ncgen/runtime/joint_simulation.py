@@ -46,7 +46,7 @@ from ncgen.model.data import model_data
 from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
 from ncgen.progress import enabled as progress_enabled
 from ncgen.runtime.simulation_progress import Progress
-from ncgen.runtime.trajectory import Trajectory, once
+from ncgen.runtime.trajectory import Derived, Trajectory, output_names
 from ncgen.runtime.tree_library import TableJointLoop, input_efforts
 
 #: The run is cut into at most this many calls of the C loop when a progress bar may be drawn
@@ -309,16 +309,15 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     if hold == "linear" and feedback is not None:
         raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
                          "interval (zoh); use hold='zoh'")
-    js = model.joint_space
     build_start = time.perf_counter()
     prepared = prepared_run(model, controller, opts, options, len(t) - 1)
     loop, build_time = prepared.loop, time.perf_counter() - build_start
-    n, nqj = len(t), js.nq
-    X = np.zeros((n, nqj + js.nv))
-    X[0, :nqj], X[0, nqj:] = run.joint_state or js.state(model, run.q, run.v)  # consistent: start_state made it so
+    (nqj, nvj, nu), n = prepared.sizes, len(t)
+    X = np.zeros((n, nqj + nvj))
+    np.concatenate(run.joint_state or model.joint_space.state(model, run.q, run.v), out=X[0])  # consistent: start_state
     U = np.ascontiguousarray(run.U, dtype=float)
-    W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and model.nu else None
-    varying = model.nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
+    W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and nu else None
+    varying = nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
     options = run_options(options, varying)
     integrator = prepared.integrator
     start = time.perf_counter()
@@ -329,7 +328,8 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     if integrator == "rk4" and (failed is not None or status not in (0, INTERRUPTED)):
         trusted, why = _trusted_rk4_rows(model, loop, t[:k + 1], X[:k + 1], W, S, p, options)
         info["complete"] = False
-    traj = _trajectory(model, loop, t[:trusted], X[:trusted], W[:trusted], p, info)
+    traj = _trajectory(model, loop, *((t, X, W) if trusted == n else (t[:trusted], X[:trusted], W[:trusted])), p, info,
+                       prepared.names)
     if failed is not None:
         cause = failed.__cause__
         if why:
@@ -371,17 +371,18 @@ KEPT_RUNS = 16
 class PreparedRun:
     """What a joint-space run derives from its options, output count, controller and
     compiler but not from its start: the loop (:func:`joint_loop`) on the kernels
-    :func:`choose_kernels` chose, the integrator's name and the run's ``info`` without its
-    per-run entries (the RK4 step ``h``, the controller's and feedback's descriptions, the
-    counts and times: set by the run)."""
+    :func:`choose_kernels` chose, the integrator's name, the sizes ``(nq_j, nv_j, nu)``, the
+    trajectory's names and the run's ``info`` without its per-run entries (the RK4 step ``h``, the controller's and
+    feedback's descriptions, the counts and times: set by the run)."""
 
-    __slots__ = ("controller", "opts", "options", "loop", "integrator", "info")
+    __slots__ = ("controller", "opts", "options", "loop", "integrator", "info", "sizes", "names")
 
     def __init__(self, model, controller, opts: JointLoopOptions, options: JointOptions, n_out: int):
         choice = choose_kernels(model, n_out, controller, opts.joint_dynamics, opts.kernels)
         self.controller, self.opts, self.options = controller, opts, options
         self.loop = joint_loop(model, controller, opts.joint_dynamics, kernels=choice.backend)
         self.integrator = integrator = integrator_name(options)
+        self.sizes, self.names = (model.joint_space.nq, model.joint_space.nv, model.nu), output_names(model)
         steps = {"rtol": options.rtol, "atol": options.atol} if integrator == "dopri5" else \
             {"h": None, "substeps": options.substeps}
         self.info = {"method": "joint", "integrator": integrator, **steps, "hold": opts.hold,
@@ -398,8 +399,9 @@ def prepared_run(model, controller, opts: JointLoopOptions, options: JointOption
     controller every loop the choice weighs, is loaded (else made on every call, as
     :func:`choose_kernels` weighs what is compiled)."""
     data = model_data(model)
-    key = (id(opts), id(options), n_out, id(controller), getenv_key("CC"), getenv_key("PATH"),
-           *_loaded(data.joint_loops))
+    loops = data.joint_loops
+    key = (id(opts), id(options), n_out, id(controller), getenv_key("CC"), getenv_key("PATH"), _OWN_LOOP in loops,
+           loops.get("tables") is not None)                        # (_loaded, inline)
     hit = data.prepared_runs.get(key)
     if hit is not None and hit.controller is controller and hit.opts is opts and hit.options is options:
         return hit
@@ -411,9 +413,13 @@ def prepared_run(model, controller, opts: JointLoopOptions, options: JointOption
     return prepared
 
 
+#: The key of the model's own loop (no controller, no joint dynamics) in ``joint_loops``.
+_OWN_LOOP = (id(None), False, None)
+
+
 def _loaded(loops: dict) -> tuple[bool, bool]:
     """Whether the model's own loop (no controller) and the tables' loop are loaded."""
-    return (id(None), False, None) in loops, loops.get("tables") is not None
+    return _OWN_LOOP in loops, loops.get("tables") is not None
 
 
 def _choice_settled(model, controller, opts: JointLoopOptions, loops: dict) -> bool:
@@ -447,6 +453,8 @@ def _integrate(model, loop, options: JointOptions, run: Run, X: np.ndarray, W: n
     status, k, failed = 0, 0, None
     chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS)) if shown else n - 1
     try:
+        if feedback is None and chunk == n - 1:     # one call over the whole grid (W, S: made contiguous)
+            status, k = loop.run(options, np.ascontiguousarray(t), X, W, S, p, stats)
         while k < n - 1 and status == 0:
             m = min(chunk, n - 1 - k)
             if feedback is not None:
@@ -517,21 +525,61 @@ def _feedback(model, feedback, t: float, x: np.ndarray, p) -> np.ndarray:
     return call_feedback(u, t, *args, nu=model.nu, what=kind)
 
 
-def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
+def _trajectory(model, loop: JointLoop, t, X, W, p, info, names) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring); ``X``
     and ``W`` are the run's own arrays, which the lazy outputs keep (``traj.qj``, ``traj.vj``
-    too: copies made when first read, so editing them changes nothing else)."""
-    js = model.joint_space
-    n = len(t)
-    W = W[:n]
-    P = once(lambda: np.repeat(np.asarray(p, float)[:, None], n, axis=1))
-    natural = once(lambda: [np.array(y).T for y in loop.mapped("tree", n)(X[:, :js.nq].T, X[:, js.nq:].T)])
-    applied = once(lambda: np.array(loop.mapped("ode", n)(t[None, :], X.T, W.T if model.nu else np.zeros((0, n)),
-                                                            P())[2]).T.reshape(n, model.nu))
-    traj = Trajectory.from_states(
-        model, t, lambda: natural()[0], lambda: natural()[1],
-        lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,
-                                                 P())[1]).T.reshape(n, model.nc),
-        applied, p, info)
-    traj.qj, traj.vj = (lambda: X[:, :js.nq].copy()), (lambda: X[:, js.nq:].copy())
-    return traj
+    too: copies made when first read, so editing them changes nothing else); ``names``: the
+    model's :func:`~ncgen.runtime.trajectory.output_names`."""
+    outputs = _JointOutputs(model, loop, t, X, W if len(W) == len(t) else W[:len(t)], p)
+    derived = Derived(model, t, outputs.q, outputs.v, p)
+    arrays = {"t": t, "lam": outputs.lam, "u": outputs.applied, "p": np.asarray(p, float), "qj": outputs.qj,
+              "vj": outputs.vj}
+    return Trajectory.of_run(model, derived, arrays, info, names)
+
+
+class _JointOutputs:
+    """The outputs of a joint run derived from its joint states ``X`` (rows at the times ``t``)
+    and applied samples ``W``, each evaluated when first asked for: the natural state (the
+    tree function, mapped), the applied inputs (the ODE's third output), the multipliers
+    (``accel`` at the natural state) and the joint states (copies)."""
+
+    __slots__ = ("model", "loop", "t", "X", "W", "p", "_natural", "_applied", "_P")
+
+    def __init__(self, model, loop, t, X, W, p):
+        self.model, self.loop, self.t, self.X, self.W, self.p = model, loop, t, X, W, p
+        self._natural = self._applied = self._P = None
+
+    def P(self) -> np.ndarray:
+        if self._P is None:
+            self._P = np.repeat(np.asarray(self.p, float)[:, None], len(self.t), axis=1)
+        return self._P
+
+    def natural(self) -> list:
+        if self._natural is None:
+            X, nqj = self.X, self.model.joint_space.nq
+            self._natural = [np.array(y).T for y in self.loop.mapped("tree", len(self.t))(X[:, :nqj].T, X[:, nqj:].T)]
+        return self._natural
+
+    def q(self) -> np.ndarray:
+        return self.natural()[0]
+
+    def v(self) -> np.ndarray:
+        return self.natural()[1]
+
+    def applied(self) -> np.ndarray:
+        if self._applied is None:
+            m, n, t = self.model, len(self.t), self.t
+            self._applied = np.array(self.loop.mapped("ode", n)(t[None, :], self.X.T, self.W.T if m.nu else
+                                                                np.zeros((0, n)), self.P())[2]).T.reshape(n, m.nu)
+        return self._applied
+
+    def lam(self) -> np.ndarray:
+        m, n, (q, v) = self.model, len(self.t), self.natural()
+        return np.array(self.loop.mapped("accel", n)(self.t[None, :], q.T, v.T, self.applied().T,
+                                                     self.P())[1]).T.reshape(n, m.nc)
+
+    def qj(self) -> np.ndarray:
+        return self.X[:, :self.model.joint_space.nq].copy()
+
+    def vj(self) -> np.ndarray:
+        return self.X[:, self.model.joint_space.nq:].copy()

@@ -45,17 +45,21 @@ def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | No
 
 def start_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None, joint: bool = False):
     """``(q, v, joint state)``: :func:`initial_state` and, when ``joint`` and the given state
-    holds as it is (one C call checks it and maps it), its ``(q_j, v_j)``, else None."""
-    js = model.joint_space
-    at_model = t0 == model.t0 and (model.np == 0 or np.array_equal(p, model.p0))
+    holds as it is (one C call checks it and maps it), its ``(q_j, v_j)`` (then ``q``, ``v``
+    are the arrays given, not copies), else None."""
+    js, shape = model.joint_space, model.q0.shape
+    at_model = t0 == model.t0 and (model.p0.size == 0 or np.array_equal(p, model.p0))
     if q0 is None and v0 is None and at_model:
         return model.q0.copy(), model.v0.copy(), None
-    if at_model and _plain(q0, model.nq) and _plain(v0, model.nq):
+    if at_model and (q0 is None or type(q0) is _ARRAY and q0.dtype == _FLOAT64 and q0.shape == shape) and \
+            (v0 is None or type(v0) is _ARRAY and v0.dtype == _FLOAT64 and v0.shape == shape):
+        # (None or float64 arrays of nq values, which _holds checks; anything else goes through as_vector,
+        # whose messages name the argument)
         q, v = (model.q0 if q0 is None else q0), (model.v0 if v0 is None else v0)
         if joint:                           # finite, in range, consistent, and its joint state: one C call
             state = js._checked_state(model, q, v, t0, p, loaded_tree_start(model))
-            if state is not None:
-                return q.copy(), v.copy(), state
+            if state is not None:           # (q, v not copied: the joint run reads its joint state only)
+                return q, v, state
         elif js._holds(model, q, v, t0, p):  # finite, in range, consistent: one C call
             return q.copy(), v.copy(), None
     q = model.q0 if q0 is None else as_vector(q0, model.nq, "q0")
@@ -72,11 +76,7 @@ def start_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None
     return state.q0, state.v0, None
 
 
-def _plain(x, n: int) -> bool:
-    """Whether ``x`` is None or a float64 array of shape ``(n,)`` (whose values
-    :meth:`~ncgen.assembly.joint_space.JointSpace._holds` checks; anything else goes through
-    :func:`~ncgen.validation.as_vector`, whose messages name the argument)."""
-    return x is None or (type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (n,))
+_ARRAY, _FLOAT64 = np.ndarray, np.float64
 
 
 def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:

@@ -6,10 +6,14 @@ from __future__ import annotations
 import dataclasses
 import inspect
 
+import numpy as np
+
 from ncgen.assembly.nonholonomic import rolling_system
+from ncgen.environment import getenv_key
 from ncgen.errors import NcgenError
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
 from ncgen.model.controllers import Controller
+from ncgen.model.data import model_data
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.idas_integrator import IdasIntegrator
 from ncgen.runtime.inputs import feedback_kind, hold_columns, input_samples, parameter_values, time_grid
@@ -168,7 +172,33 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
     and the likely cause, and carries the trajectory up to that time (``.trajectory``).
     """
-    opts = SimulationOptions.resolve(options, **shortcuts)
+    plan = _kept_plan(model, t_end, dt, options, shortcuts) if u is None and p is None and t0 is None else None
+    if plan is None:
+        plan = Plan(model, t_end, dt, t0, options, shortcuts)
+    opts, t0, t = plan.opts, plan.t0, plan.t.copy()
+    pv = model.p0.copy() if p is None else parameter_values(p, model)
+    if u is None:
+        controller = feedback = None
+    else:
+        controller = u if isinstance(u, Controller) else None
+        kind = feedback_kind(u) if controller is None else None
+        feedback = (kind, u) if kind in ("natural", "joint") else None
+    if u is None and plan.U is not None:
+        U, columns = plan.U, plan.columns
+    else:
+        U = input_samples(None if controller is not None else u, model, t)
+        columns = hold_columns(U, t, opts.hold)
+    q, v, joint = start_state(model, q0, v0, t0, pv, opts.ic_tolerance, joint=plan.method == "joint")
+    run = Run(t, U, columns, pv, q, v, controller, feedback, plan.why_not,
+              lambda tk, qk, vk, uk: initial_multipliers(model, tk, qk, vk, uk, pv, load_dae(model, "vm")[0]),
+              lambda tk, qk, vk: natural_feedback(model, feedback, tk, qk, vk, pv), joint)
+    with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
+        raise_if_interrupted()
+        return plan.integrator.run(run)
+
+
+def _method(model, opts: SimulationOptions) -> tuple[str, str | None]:
+    """``(method, why not joint)``: ``opts.method`` with ``"auto"`` resolved (see :func:`simulate`)."""
     method, why_not = opts.method, None
     if model.rolling and method not in ("auto", "rolling", "idas", "stepper"):
         raise NcgenError(f"method={method!r}: model {model.name!r} has rolling elements "
@@ -182,22 +212,58 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     elif method == "auto":                 # the joint loop is compiled: backend="vm" asks for no compiling
         why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
         method = "joint" if why_not is None else "idas"
-    integrator = INTEGRATORS[method](model, opts)
-    t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
-    t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
-    pv = parameter_values(p, model)
-    controller = u if isinstance(u, Controller) else None
-    kind = feedback_kind(u) if controller is None else None
-    feedback = (kind, u) if kind in ("natural", "joint") else None
-    U = input_samples(None if controller is not None else u, model, t)
-    q, v, joint = start_state(model, q0, v0, t0, pv, opts.ic_tolerance, joint=method == "joint")
-    run = Run(t, U, hold_columns(U, t, opts.hold), pv, q, v, controller, feedback, why_not,
-              multipliers=lambda tk, qk, vk, uk: initial_multipliers(model, tk, qk, vk, uk, pv,
-                                                                     load_dae(model, "vm")[0]),
-              feedback_input=lambda tk, qk, vk: natural_feedback(model, feedback, tk, qk, vk, pv), joint_state=joint)
-    with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
-        raise_if_interrupted()
-        return integrator.run(run)
+    return method, why_not
+
+
+class Plan:
+    """What :func:`simulate` derives from its arguments but not from the start, the inputs or
+    the parameters: the options resolved, the method (and why not the joint loop), the
+    integrator prepared, ``t0`` and the grid (each run copies it) and, for a plan that is kept,
+    the inputs of ``u=None`` (zeros, read only) and their hold columns."""
+
+    __slots__ = ("options", "opts", "method", "why_not", "integrator", "t0", "t", "U", "columns")
+
+    def __init__(self, model, t_end, dt, t0, options, shortcuts: dict):
+        self.options = options
+        self.opts = opts = SimulationOptions.resolve(options, **shortcuts)
+        self.method, self.why_not = _method(model, opts)
+        self.integrator = INTEGRATORS[self.method](model, opts)
+        self.t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
+        self.t = time_grid(self.t0, t_end, dt, bytes_per_point=point_bytes(model))
+        self.U = self.columns = None
+
+
+#: Plans kept per model (:func:`_kept_plan`; then forgotten all at once).
+KEPT_PLANS = 16
+_PLAIN = (float, int)
+
+
+def _kept_plan(model, t_end, dt, options, shortcuts: dict) -> Plan | None:
+    """The :class:`Plan` of a call without inputs, parameters or ``t0`` that runs the joint
+    loop, kept per model, ``t_end``, ``dt`` (plain numbers), options (the object), option
+    keywords (values and types) and ``$NCGEN_MAX_BYTES`` (the grid's limit; the model is constant); None
+    for any other call (unhashable keywords, another method), which makes its plan afresh."""
+    if type(t_end) not in _PLAIN or type(dt) not in _PLAIN:
+        return None
+    key = (t_end, type(t_end), dt, type(dt), id(options), getenv_key("NCGEN_MAX_BYTES"),
+           *shortcuts.items(), *map(type, shortcuts.values()))
+    plans = model_data(model).simulate_plans
+    try:
+        plan = plans.get(key)
+    except TypeError:                      # an unhashable keyword value
+        return None
+    if plan is not None and plan.options is options:
+        return plan
+    plan = Plan(model, t_end, dt, None, options, shortcuts)
+    if plan.method != "joint":
+        return plan
+    plan.U = np.zeros((len(plan.t), model.nu))
+    plan.columns = hold_columns(plan.U, plan.t, plan.opts.hold)
+    plan.U.flags.writeable = plan.columns.flags.writeable = False
+    if len(plans) >= KEPT_PLANS:
+        plans.clear()
+    plans[key] = plan
+    return plan
 
 
 #: The integrators by ``SimulationOptions.method`` (:mod:`ncgen.runtime.integrator`).

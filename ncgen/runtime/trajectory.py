@@ -85,9 +85,11 @@ class Derived:
     asked for (``derived(key)``) and kept — one object per run, where a function per output
     would cost a closure each."""
 
+    __slots__ = ("model", "t", "p", "impulses", "_states", "_kept", "keys")
+
     def __init__(self, model, t, q, v, p, impulses=None):
         self.model, self.t, self.p, self.impulses = model, t, p, impulses
-        self._states = [x if callable(x) else _float(x) for x in (q, v)]
+        self._states = [q if callable(q) else _float(q), v if callable(v) else _float(v)]
         self._kept: dict = {}
         self.keys = _KEYS_CONTACTS if getattr(model, "nk", 0) else _KEYS
 
@@ -171,17 +173,6 @@ class _Names:
         return value
 
 
-def once(f):
-    """``f()`` computed at the first call and kept (several arrays from one evaluation)."""
-    kept = []
-
-    def value():
-        if not kept:
-            kept.append(f())
-        return kept[0]
-    return value
-
-
 _FLOAT64 = np.dtype(np.float64)
 
 
@@ -257,9 +248,27 @@ class Trajectory:
         ``impulses``: the nonsmooth stepper's contact impulse sums per output interval.  A run
         that has its joint states sets ``qj`` and ``vj`` afterwards (else they are derived)."""
         t = np.asarray(t, float)
-        return cls(model_name=model.name, names=output_names(model), info=info, model=model,
-                   derived=Derived(model, t, q, v, p, impulses), t=t, q=None if callable(q) else q,
-                   v=None if callable(v) else v, lam=lam, u=u, p=p)
+        derived = Derived(model, t, q, v, p, impulses)
+        arrays = {"t": t, "lam": lam if callable(lam) else _float(lam), "u": u if callable(u) else _float(u),
+                  "p": _float(p)}
+        if not callable(q):
+            arrays["q"] = derived.state(0)
+        if not callable(v):
+            arrays["v"] = derived.state(1)
+        return cls.of_run(model, derived, arrays, dict(info))
+
+    @classmethod
+    def of_run(cls, model, derived: Derived, arrays: dict, info: dict, names: dict | None = None) -> "Trajectory":
+        """A run's trajectory made directly (a short run's fixed cost): ``arrays`` (``t`` and
+        ``p`` as float arrays, the others float arrays or functions computing them; the
+        arrays not given are ``derived``'s) and ``info`` become the trajectory's own (not
+        copied: the caller's fresh objects); ``names``: :func:`output_names` of ``model``
+        (found when None)."""
+        traj = cls.__new__(cls)
+        d = traj.__dict__
+        d["model"], d["model_name"], d["_names"], d["_derived"], d["_arrays"], d["info"] = \
+            model, model.name, output_names(model) if names is None else names, derived, arrays, info
+        return traj
 
     def head(self, n: int) -> "Trajectory":
         """The first ``n`` samples (every per-sample array cut, names and ``info`` copied)."""
