@@ -43,7 +43,7 @@ import numpy as np
 
 from ncgen.blas_threads import one_blas_thread
 from ncgen.control.discrete import step_jacobian_function
-from ncgen.control.mpc_problem import mpc_problem
+from ncgen.control.mpc_problem import mpc_problem, qp_rows
 from ncgen.control.mpc_qp import GENERATED, InProcessQP, check_qp_solver, qp_function
 from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import as_scalar
@@ -104,19 +104,6 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     blocks = ca.Function("mpc_qp_blocks", [x, t, X, U], [ca.densify(e) for e in outputs],
                          ["x", "t", "X_guess", "U_guess"], names)
     return [blocks, qp, update_function(nx, nu, N), merit_function(model, problem)]
-
-
-def bounded_states(problem) -> np.ndarray:
-    """The state components with a finite bound: the QP's first rows, at nodes ``1..N``."""
-    lo_x, hi_x = problem.x_bounds
-    return np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
-
-
-def qp_rows(problem, nx: int) -> int:
-    """The condensed QP's general rows: the bounded state components at nodes ``1..N``, then,
-    with ``min_tension``, the cables' pulls at both ends of every interval."""
-    n_taut = 0 if problem.min_tension is None else problem.N * problem.cable_pull.numel_out(0)
-    return problem.N * len(bounded_states(problem)) + n_taut
 
 
 def update_function(nx: int, nu: int, N: int) -> ca.Function:

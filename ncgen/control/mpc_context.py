@@ -22,7 +22,7 @@ def controller_context(model, problem, fns, iterations: int | None, rules: dict)
     (:func:`~ncgen.codegen.kernels.c_function`: an MX wrapper asks for more than what it calls;
     ``init`` refuses work arrays its functions do not fit in)."""
     from ncgen.codegen.kernels import c_function
-    from ncgen.control.mpc import bounded_states, qp_rows
+    from ncgen.control.mpc_problem import bounded_states, qp_rows
     nx, nu = 2 * model.nq, model.nu
     u_rest = np.clip(np.zeros(nu), *problem.u_bounds)
     lo_x, hi_x = problem.x_bounds

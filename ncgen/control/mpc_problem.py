@@ -231,3 +231,16 @@ def initial_state(ocp, p) -> np.ndarray:
     v = spec["v"]
     v = model.v0 if v is MODEL_STATE or v is None else resolve_velocity(model, v, q, t=ocp.t0, p=p)
     return np.concatenate([q, v])
+
+
+def bounded_states(problem) -> np.ndarray:
+    """The state components with a finite bound: the QP's first rows, at nodes ``1..N``."""
+    lo_x, hi_x = problem.x_bounds
+    return np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
+
+
+def qp_rows(problem, nx: int) -> int:
+    """The condensed QP's general rows: the bounded state components at nodes ``1..N``, then,
+    with ``min_tension``, the cables' pulls at both ends of every interval."""
+    n_taut = 0 if problem.min_tension is None else problem.N * problem.cable_pull.numel_out(0)
+    return problem.N * len(bounded_states(problem)) + n_taut
