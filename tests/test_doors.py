@@ -396,3 +396,24 @@ def test_a_door_is_found_again_until_its_kernels_or_the_flags_change(monkeypatch
     assert default.flags is None and default.kernel.optimised
     monkeypatch.setenv("NCGEN_CFLAGS", "-O0")
     assert aba_flat() is default
+
+
+def test_the_flags_reader_is_the_environments_value_and_follows_its_changes(monkeypatch):
+    """The doors' check of ``$NCGEN_CFLAGS`` (:func:`ncgen.environment.key_reader`) gives the
+    environment's own value object (that of ``getenv_key``, decoded ``os.environ.get``'s text):
+    the same one while the variable is unchanged, a new one after every change (also to the same
+    text), None once it is removed."""
+    import os
+
+    from ncgen.environment import decoded, getenv_key, key_reader
+    read = key_reader("NCGEN_DOOR_TEST")
+    monkeypatch.delenv("NCGEN_DOOR_TEST", raising=False)
+    assert read() is None
+    monkeypatch.setenv("NCGEN_DOOR_TEST", "-O0 é")
+    first = read()
+    assert first is getenv_key("NCGEN_DOOR_TEST") and read() is first
+    assert decoded(first) == os.environ.get("NCGEN_DOOR_TEST") == "-O0 é"
+    monkeypatch.setenv("NCGEN_DOOR_TEST", "-O0 é")
+    assert read() is not first and decoded(read()) == "-O0 é"
+    monkeypatch.delenv("NCGEN_DOOR_TEST")
+    assert read() is None
