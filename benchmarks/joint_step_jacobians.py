@@ -15,7 +15,8 @@ to about its ``eps``² for centred ones), then timed in interleaved batches (CPU
 
 - ``JointStep.jacobians`` (checked inputs), ``JointStep.unchecked_jacobians``, and the call it
   makes, ``ncgen.runtime.tree_algorithm_kernels.aba_derivatives`` (compiled ABA derivatives), which
-  shows where the time goes: the rest is the assembly of A and B in NumPy;
+  shows where the time goes: the rest is the assembly of x⁺, A and B (one C call of
+  ``ncgen.control.joint_step.step_jacobians_function`` on the kernel's buffers);
 - ``mujoco.mjd_transitionFD`` centred (eps 1e-6) and forward.
 
     python benchmarks/joint_step_jacobians.py [--calls 200] [--repeat 7] [--smoke]

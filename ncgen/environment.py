@@ -6,7 +6,9 @@ items up to date on every change made through it); where that dict is not there 
 Python), ``os.environ.get`` itself."""
 from __future__ import annotations
 
+import functools
 import os
+from collections.abc import Callable
 
 _DATA = getattr(os.environ, "_data", None)
 _FAST = os.name == "posix" and type(_DATA) is dict
@@ -27,3 +29,11 @@ def getenv_key(name: str) -> bytes | str | None:
 def decoded(value: bytes | str) -> str:
     """A value of :func:`getenv_key` as text."""
     return os.fsdecode(value) if type(value) is bytes else value
+
+
+def key_reader(name: str) -> Callable[[], bytes | str | None]:
+    """``lambda: getenv_key(name)`` in ~30 ns (the dictionary's ``get`` bound to the encoded
+    name): for a cache that checks on every call that a variable has not changed."""
+    if _FAST:
+        return functools.partial(_DATA.get, name.encode("utf-8", "surrogateescape"))
+    return functools.partial(os.environ.get, name)

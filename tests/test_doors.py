@@ -116,7 +116,7 @@ def test_auto_rnea_takes_the_tables_and_both_kernels_equal_pinocchio(tree):
     assert rta.algorithm_kernels(tree, "rnea") == "tables"
     assert "measures faster" in rta.kernels_reason(tree, "rnea")
     nc.inverse_dynamics(tree, *state(tree)[:3], joints="all")
-    assert rta.door(tree, "rnea").tables and rta.door(tree, "rnea") is model_data(tree).rnea_efforts["all"]
+    assert rta.door(tree, "rnea").tables and model_data(tree).rnea_efforts["all"] is True
     assert rta.algorithm_kernels(tree, "crba") == "flat" and rta.kernels_reason(tree, "rnea", "flat") == "chosen (kernels=)"
     pm = pin.buildModelFromXML(URDF, pin.JointModelFreeFlyer())
     d, jm = pm.createData(), JointMap(tree, pm)
@@ -360,3 +360,60 @@ def test_a_singular_or_non_finite_aba_on_the_c_caller_is_refused_naming_why():
     assert nc.aba(feather, [0.0], [0.0], [1.0]) == pytest.approx([1e250 - 9.81], rel=1e-12)
     with pytest.raises(ModelError, match="result is not finite"):
         nc.aba(feather, [0.0], [0.0], [1e100])
+
+
+def test_a_door_is_found_again_until_its_kernels_or_the_flags_change(monkeypatch):
+    """A door is bound once per model, algorithm and ``kernels=`` and found again on every call
+    (the same object, the same kernel); another ``kernels=`` has its own door; a door bound
+    under ``$NCGEN_CFLAGS`` is bound again when they change (to a kernel built under the new
+    flags) and back (to the kernel of the old ones), kept when they are set again to the same
+    text; a door bound at ncgen's defaults is kept when they are set.  Every result is the
+    closed form of a 2 kg slider on z: ``a = τ / m − g``."""
+    model = _sliders("door_slider", (2.0,), (-1,))
+    tau, g = 3.0, 9.81
+
+    def aba_flat():
+        a = nc.aba(model, [0.1], [0.2], [tau], kernels="flat")
+        assert a == pytest.approx([tau / 2.0 - g], abs=1e-12)
+        return rta.door(model, "aba", "flat")
+
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O0")
+    first = aba_flat()
+    assert first.flags == "-O0" and aba_flat() is first and rta.door(model, "aba", "flat") is first
+    assert nc.aba(model, [0.1], [0.2], [tau]) == pytest.approx([tau / 2.0 - g], abs=1e-12)
+    assert rta.door(model, "aba") is not first and rta.door(model, "aba", "flat") is first
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O1")
+    other = aba_flat()
+    assert other is not first and other.flags == "-O1" and other.kernel is not first.kernel
+    assert _recorded_flags(other.kernel) == ["-O1"]
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O0")
+    back = aba_flat()
+    assert back is not other and back.kernel is first.kernel
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O0")          # the same text again: a new value object, the same door
+    assert aba_flat() is back
+    monkeypatch.delenv("NCGEN_CFLAGS")
+    default = aba_flat()
+    assert default.flags is None and default.kernel.optimised
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O0")
+    assert aba_flat() is default
+
+
+def test_the_flags_reader_is_the_environments_value_and_follows_its_changes(monkeypatch):
+    """The doors' check of ``$NCGEN_CFLAGS`` (:func:`ncgen.environment.key_reader`) gives the
+    environment's own value object (that of ``getenv_key``, decoded ``os.environ.get``'s text):
+    the same one while the variable is unchanged, a new one after every change (also to the same
+    text), None once it is removed."""
+    import os
+
+    from ncgen.environment import decoded, getenv_key, key_reader
+    read = key_reader("NCGEN_DOOR_TEST")
+    monkeypatch.delenv("NCGEN_DOOR_TEST", raising=False)
+    assert read() is None
+    monkeypatch.setenv("NCGEN_DOOR_TEST", "-O0 é")
+    first = read()
+    assert first is getenv_key("NCGEN_DOOR_TEST") and read() is first
+    assert decoded(first) == os.environ.get("NCGEN_DOOR_TEST") == "-O0 é"
+    monkeypatch.setenv("NCGEN_DOOR_TEST", "-O0 é")
+    assert read() is not first and decoded(read()) == "-O0 é"
+    monkeypatch.delenv("NCGEN_DOOR_TEST")
+    assert read() is None

@@ -68,16 +68,20 @@ def test_joint_step_jacobians_match_central_differences(two_link):
 @pytest.mark.parametrize("kernels", ["auto", "tables"])
 def test_joint_step_results_are_its_own_and_equal_the_formula_of_aba_derivatives(two_link, kernels):
     """The step assembles x⁺, A, B from the kernel's output buffers without copying them first
-    (issue 37's ≤ 0.5× ``mjd_transitionFD``): a later call must not change earlier results, and
-    each equals the module's formula on ``nc.aba_derivatives`` (the flat kernel; Pinocchio's
+    (issue 37's ≤ 0.5× ``mjd_transitionFD``; the flat kernel: one C call of the compiled formula,
+    the tables': CasADi evaluates it): a later call must not change earlier results, ``out=`` is
+    written in place with the same values, a bad ``out`` is named, and each result equals the
+    module's formula written here in NumPy on ``nc.aba_derivatives`` (the flat kernel; Pinocchio's
     conventions, checked against Pinocchio in tests/test_tree_algorithms_pinocchio.py) and central
     differences of the step."""
-    from ncgen.runtime.tree_algorithm_kernels import aba_derivatives, kernel_of
-    step, h = JointStep(two_link, 0.01), 0.01
-    step._derivatives = kernel_of(two_link, "aba_derivatives", kernels)
+    from ncgen.errors import ShapeError
+    from ncgen.runtime.tree_algorithm_kernels import aba_derivatives
+    step, h = JointStep(two_link, 0.01, kernels=kernels), 0.01
+    assert (step._assemble is None) == (kernels == "tables")
     rng = np.random.default_rng(5)
     states = [(rng.normal(size=4), 3 * rng.normal(size=2)) for _ in range(3)]
     results = [step.jacobians(x, u) for x, u in states]
+    out = (np.empty(4), np.empty((4, 4)), np.empty((4, 2)))
     for (x, u), (x1, A, B) in zip(states, results):
         a, da_dq, da_dv, Minv = aba_derivatives(two_link, x[:2], x[2:], u)
         v1 = x[2:] + h * a
@@ -89,6 +93,14 @@ def test_joint_step_results_are_its_own_and_equal_the_formula_of_aba_derivatives
         An, Bn = central_jacobians(step, x, u)
         assert np.max(np.abs(A - An)) < 1e-7 * (1 + np.max(np.abs(A)))
         assert np.max(np.abs(B - Bn)) < 1e-7 * (1 + np.max(np.abs(B)))
+        assert step.jacobians(x, u, out=out) is out
+        for got, want in zip(out, (x1, A, B)):
+            np.testing.assert_array_equal(got, want)
+    with pytest.raises(ShapeError, match=r"JointStep.jacobians: out: expected a writable C-contiguous float64 "
+                                         r"array of shape \(4, 2\), got float64 array of shape \(2, 4\)"):
+        step.jacobians(*states[0], out=(np.empty(4), np.empty((4, 4)), np.empty((2, 4))))
+    with pytest.raises(NcgenError, match="kernels: expected one of 'auto', 'tables', 'flat', got 'fast'"):
+        JointStep(two_link, 0.01, kernels="fast")
 
 
 def test_joint_step_is_mujocos_euler_step(two_link):

@@ -84,6 +84,14 @@ static int check_bound(const double *x, Py_ssize_t n, double bound, int k) {
 
 static int copy_in(double *dst, Py_ssize_t n, PyObject *x, int k, double bound) {
     Py_buffer view;
+    if (PyArray_Check(x)) {                     /* the common case without the buffer protocol's format string */
+        PyArrayObject *a = (PyArrayObject *)x;
+        if (PyArray_TYPE(a) == NPY_DOUBLE && PyArray_ISNOTSWAPPED(a) && PyArray_IS_C_CONTIGUOUS(a)
+            && PyArray_SIZE(a) == n && (bound <= 0 || PyArray_NDIM(a) == 1)) {
+            memcpy(dst, PyArray_DATA(a), (size_t)n * 8);
+            return bound > 0 ? check_bound(dst, n, bound, k) : 0;
+        }
+    }
     if (raw_bytes(x)) {
         PyErr_Format(PyExc_TypeError, "argument %d: expected numbers, got %s (raw bytes are not read as numbers)",
                      k, Py_TYPE(x)->tp_name);

@@ -14,6 +14,12 @@ and its Jacobians follow from ABA's derivatives (:func:`ncgen.runtime.tree_algor
     ∂v⁺/∂x = [h ∂a/∂q,  I + h ∂a/∂v],      ∂v⁺/∂τ = h M⁻¹,
     ∂q⁺/∂x = [I, 0] + h ∂v⁺/∂x,            ∂q⁺/∂τ = h ∂v⁺/∂τ.
 
+These formulas are :func:`step_jacobians_function`, compiled once per ``n`` (cached by content)
+and called in one C call on the kernel's output buffers, returning fresh ``(x⁺, A, B)`` or
+writing them into ``out=`` (:func:`~ncgen.codegen.fast_call.fast_caller`'s door: a call costs
+the kernel and about 1 µs); without a C compiler, the extension or a flat kernel, CasADi
+evaluates the same function.
+
 It is time-invariant; :func:`ncgen.control.ilqr.ilqr` takes it as it takes a natural-coordinate
 step (Gauss–Newton: no second derivatives of this step; the parameters are those given here).
 
@@ -22,12 +28,16 @@ whose every rate is independent (no mimic joint) take it; others are refused by 
 """
 from __future__ import annotations
 
+import functools
+import os
+
+import casadi as ca
 import numpy as np
 
 from ncgen.control.step import StepFunction
-from ncgen.errors import NcgenError
-from ncgen.runtime.tree_algorithm_kernels import aba, aba_derivatives, buffers, kernel_of
-from ncgen.validation import as_vector, positive
+from ncgen.errors import CompilerNotFound, NcgenError
+from ncgen.runtime.tree_algorithm_kernels import KERNELS, AlgorithmKernel, aba, aba_derivatives, buffers, kernel_of
+from ncgen.validation import as_vector, positive, write_out
 
 
 def joint_step_refusal(model) -> str | None:
@@ -41,27 +51,76 @@ def joint_step_refusal(model) -> str | None:
     return None
 
 
+def step_jacobians_function(n: int) -> ca.Function:
+    """``(h, a, da_dq, da_dv, Minv, x) -> (x⁺, A, B)``: the step and its Jacobians (module
+    docstring) from ABA's outputs at ``x = [q; v]`` (``n`` rates; matrices ``n × n``, stored
+    column-major as the kernel writes them)."""
+    h, a, x = ca.SX.sym("h"), ca.SX.sym("a", n), ca.SX.sym("x", 2 * n)
+    da_dq, da_dv, Minv = (ca.SX.sym(name, n, n) for name in ("da_dq", "da_dv", "Minv"))
+    eye, zero = ca.SX.eye(n), ca.SX.zeros(n, n)
+    v1 = a * h + x[n:]
+    Av = ca.horzcat(da_dq * h, da_dv * h)                  # ∂v⁺/∂x − [0, I]
+    A = ca.vertcat(Av * h + ca.horzcat(eye, h * eye), Av + ca.horzcat(zero, eye))
+    B = ca.vertcat(Minv * h * h, Minv * h)
+    return ca.Function("joint_step_jacobians", [h, a, da_dq, da_dv, Minv, x],
+                       [ca.vertcat(v1 * h + x[:n], v1), ca.densify(A), ca.densify(B)],
+                       ["h", "a", "da_dq", "da_dv", "Minv", "x"], ["x1", "A", "B"])
+
+
+#: ``{(n, $NCGEN_CFLAGS): DirectFunction}``: :func:`step_jacobians_function` compiled, per process.
+_COMPILED: dict = {}
+
+
+def compiled_assembly(kernel, n: int, h: float):
+    """``assemble(x)`` or ``assemble(x, out)``: ``(x⁺, A, B)`` from the output buffers of the
+    flat ABA-derivatives ``kernel`` (just called at ``x``) in one C call, fresh arrays or
+    written into ``out`` (a ValueError for a bad ``out``); None for a kernel on the tree tables,
+    without a C compiler or without the extension."""
+    from ncgen.codegen.direct import compile_direct
+    from ncgen.codegen.fast_call import fast_caller
+
+    if not isinstance(kernel, AlgorithmKernel):
+        return None
+    key = n, os.environ.get("NCGEN_CFLAGS")
+    if key not in _COMPILED:
+        try:
+            _COMPILED[key] = compile_direct(f"joint_step_jacobians_{n}", step_jacobians_function(n))
+        except CompilerNotFound:
+            _COMPILED[key] = None
+    if _COMPILED[key] is None:
+        return None
+    direct = _COMPILED[key].copy()                          # buffers of its own: h is this step's
+    direct.inputs[0][0] = h
+    x1, A, B = direct.outputs
+    fast = fast_caller(direct, 5, first=1, outputs=[(x1, 2 * n, 0), (A, 2 * n, 2 * n), (B, 2 * n, n)])
+    return None if fast is None else functools.partial(fast, *kernel.direct.outputs[:4])
+
+
 class JointStep:
     """``x⁺ = step(x, τ)`` and ``(x⁺, A, B) = step.jacobians(x, τ)`` (module docstring) of
-    ``model`` with the step ``h`` (s) and parameters ``p`` (None: the model's)."""
+    ``model`` with the step ``h`` (s) and parameters ``p`` (None: the model's); ``kernels``:
+    those of ABA's derivatives (:func:`~ncgen.runtime.tree_algorithm_kernels.algorithm_kernels`)."""
 
     #: iLQR runs Gauss–Newton on this step (:func:`ncgen.control.ilqr.ilqr`).
     second_derivatives = False
 
-    def __init__(self, model, h: float, *, p=None):
+    def __init__(self, model, h: float, *, p=None, kernels: str = "auto"):
         why = joint_step_refusal(model)
         if why is not None:
             raise NcgenError(f"JointStep: {why}")
         self.model, self.h, self.p = model, positive(h, "JointStep: h (the step, s)"), p
         self.n = model.joint_space.nv
-        a, *_ = aba_derivatives(model, np.zeros(self.n), np.zeros(self.n), np.zeros(self.n), p=p)
+        if kernels not in KERNELS:
+            raise NcgenError(f"JointStep: kernels: expected one of {', '.join(map(repr, KERNELS))}, got {kernels!r}")
+        a, *_ = aba_derivatives(model, np.zeros(self.n), np.zeros(self.n), np.zeros(self.n), p=p, kernels=kernels)
         if a.shape != (self.n,):
             raise NcgenError(f"JointStep: model {model.name!r} has dependent joint rates (a mimic joint: "
                              f"{a.shape[0]} independent of {self.n}); lock or remove the follower joints")
         self.nx, self.nu = 2 * self.n, self.n
         n, h = self.n, self.h
-        self._derivatives = kernel_of(model, "aba_derivatives", "auto")
-        self._A0 = np.block([[np.eye(n), h * np.eye(n)], [np.zeros((n, n)), np.eye(n)]])
+        self._derivatives = kernel_of(model, "aba_derivatives", kernels)
+        self._assemble = compiled_assembly(self._derivatives, n, h)
+        self._function = None if self._assemble is not None else step_jacobians_function(n)
 
     def _split(self, x, tau):
         """``x, tau`` as float vectors of the right sizes (float64 vectors of those sizes pass
@@ -108,26 +167,27 @@ class JointStep:
         v1 = x[n:] + h * aba(self.model, x[:n], x[n:], tau, p=self.p)
         return np.concatenate([x[:n] + h * v1, v1])
 
-    def jacobians(self, x, tau, p=None, t=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(x⁺, A = ∂x⁺/∂x, B = ∂x⁺/∂τ)`` at ``(x, τ)`` (``t`` ignored)."""
+    def jacobians(self, x, tau, p=None, t=None, *, out=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x⁺, A = ∂x⁺/∂x, B = ∂x⁺/∂τ)`` at ``(x, τ)`` (``t`` ignored); ``out``: a tuple of
+        three writable C-contiguous float64 arrays of shapes ``(2n,)``, ``(2n, 2n)``, ``(2n, n)``,
+        written and returned."""
         self._same(p, "jacobians")
-        return self.unchecked_jacobians(*self._split(x, tau))
+        return self.unchecked_jacobians(*self._split(x, tau), out=out)
 
-    def unchecked_jacobians(self, x: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def unchecked_jacobians(self, x: np.ndarray, tau: np.ndarray, *,
+                            out=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`jacobians` of a float vector ``x`` and ``tau`` of the right sizes, unchecked
         (the MPC's rollout; the kernel still refuses values that are not finite)."""
-        h, n = self.h, self.n
-        a, da_dq, da_dv, Minv = buffers(self.model, self._derivatives, (x[:n], x[n:], tau), self.p, 0.0)
-        x1, A, B = np.empty(2 * n), np.empty((2 * n, 2 * n)), np.empty((2 * n, n))
-        np.multiply(a, h, out=x1[n:])       # the kernel's buffers read once, written into the results
-        x1[n:] += x[n:]                     # v⁺
-        np.multiply(x1[n:], h, out=x1[:n])
-        x1[:n] += x[:n]                     # q⁺
-        Av, Bv = A[n:], B[n:]
-        np.multiply(da_dq, h, out=Av[:, :n])
-        np.multiply(da_dv, h, out=Av[:, n:])    # ∂v⁺/∂x − [0, I]
-        np.multiply(Av, h, out=A[:n])
-        A += self._A0
-        np.multiply(Minv, h, out=Bv)
-        np.multiply(Bv, h, out=B[:n])
-        return x1, A, B
+        n = self.n
+        outputs = buffers(self.model, self._derivatives, (x[:n], x[n:], tau), self.p, 0.0)
+        assemble = self._assemble
+        if assemble is not None:
+            if out is None:
+                return assemble(x)
+            try:
+                return assemble(x, out)
+            except ValueError:              # a bad out: write_out names what is wrong with it
+                return write_out(out, assemble(x), "JointStep.jacobians")
+        result = tuple(np.array(r) for r in self._function(self.h, *outputs, x))
+        result = (result[0].reshape(-1), *result[1:])
+        return result if out is None else write_out(out, result, "JointStep.jacobians")

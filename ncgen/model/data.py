@@ -66,11 +66,8 @@ class ModelData:
     #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
     #: indices None when not (:func:`ncgen.runtime.tree_algorithm_kernels.rnea_applies`).
     algorithm_rates: tuple | None = None
-    #: ``{(name, kernels): Door}``: ``nc.rnea``, ``nc.aba``, ... bound to their kernels
-    #: (:func:`ncgen.runtime.tree_algorithm_kernels.door`).
-    doors: dict = field(default_factory=dict)
-    #: ``{joints: Door or False}``: the compiled RNEA when it gives
-    #: ``nc.inverse_dynamics(..., joints=joints)`` (:func:`ncgen.runtime.dynamics_at_state._rnea_kernel`).
+    #: ``{joints: bool}``: whether the compiled RNEA gives ``nc.inverse_dynamics(...,
+    #: joints=joints)`` (:func:`ncgen.runtime.dynamics_at_state._rnea_gives`).
     rnea_efforts: dict = field(default_factory=dict)
     #: ``(f,)``: the joint-space tree map ``(q_j, v_j) -> (q, v)``, f None for a model that is
     #: not a tree (``JointSpace._tree`` in :mod:`ncgen.assembly.joint_space`).

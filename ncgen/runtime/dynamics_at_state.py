@@ -27,7 +27,7 @@ from ncgen.assembly.manifold import solve_linear
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.model.rolling import refuse_rolling
-from ncgen.runtime.tree_algorithm_kernels import door, rnea_applies, through
+from ncgen.runtime.tree_algorithm_kernels import rnea_applies, through
 from ncgen.validation import as_vector, write_out
 
 
@@ -99,25 +99,28 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
     return x[:nq], x[nq:]
 
 
-def _rnea_kernel(model, joints: str):
-    """The door of the compiled RNEA (:func:`~ncgen.runtime.tree_algorithm_kernels.door`) when it
-    gives the efforts ``joints`` asks for (a 3D tree whose asked-for efforts are those of its
-    independent joint rates), else False (decided once per model; a door bound under
-    ``$NCGEN_CFLAGS`` is asked for again: :func:`~ncgen.runtime.tree_algorithm_kernels.door`)."""
+def _rnea_gives(model, joints: str) -> bool:
+    """Whether the compiled RNEA (:func:`~ncgen.runtime.tree_algorithm_kernels.rnea`) gives the
+    efforts ``joints`` asks for (a 3D tree whose asked-for efforts are those of its independent
+    joint rates), decided once per model; a yes is also kept in :data:`_RNEA_GIVES`."""
     if joints not in ("actuated", "all"):
         raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
     data = model_data(model)
-    k = data.rnea_efforts.get(joints)
-    if k:
-        k = data.rnea_efforts[joints] = door(model, "rnea")
-    elif k is None:
+    takes = data.rnea_efforts.get(joints)
+    if takes is None:
         js, independent = model.joint_space, rnea_applies(model)
         sv = js.slices(rates=True)
         actuated = [i for n in js.joint_names if n in model.actuated_joints for i in range(sv[n].start, sv[n].stop)]
-        takes = independent is not None and (
+        takes = data.rnea_efforts[joints] = independent is not None and (
             independent == actuated if joints == "actuated" else len(independent) == js.nv)
-        k = data.rnea_efforts[joints] = door(model, "rnea") if takes else False
-    return k
+    if takes:
+        _RNEA_GIVES.add((model, joints))
+    return takes
+
+
+#: ``{(model, joints)}`` where :func:`_rnea_gives` said yes: one set lookup a call (the RNEA's
+#: door holds the model as long).
+_RNEA_GIVES: set = set()
 
 
 def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated", *,
@@ -130,11 +133,8 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     (:func:`~ncgen.runtime.tree_algorithm_kernels.rnea`, from the tree tables when they cover the model) when the efforts asked for are those of the
     independent joint rates; other models solve the constrained equations of motion.
     ``out``: an array of the efforts' size written and returned (float64, C-contiguous)."""
-    k = model_data(model).rnea_efforts.get(joints)
-    if k is None or (k and k.flags is not None):
-        k = _rnea_kernel(model, joints)
-    if k:
-        return through(k, qj, vj, aj, p, t, out)
+    if (model, joints) in _RNEA_GIVES or _rnea_gives(model, joints):
+        return through(model, "rnea", "auto", qj, vj, aj, p, t, out)
     t = float(t)
     js = model.joint_space
     p = model.p0 if p is None else as_vector(p, model.np, "p")

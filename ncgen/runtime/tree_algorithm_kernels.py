@@ -49,6 +49,7 @@ from ncgen.codegen.compiler import compiler_present
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, ShapeError
 from ncgen.model.data import cached, model_data
+from ncgen.environment import key_reader
 from ncgen.codegen.tree_check import (ALGORITHMS, PIVOT_TOL, check_tree, compile_tree_function, quaternion_offsets,
                                       unit_quaternions)
 from ncgen.runtime.kernel_time_parameters import TimeAndParameters
@@ -292,12 +293,13 @@ class Door:
     ``free``: the door caller itself where any time and the default parameters go to it (the
     tables' algorithms, and flat kernels whose outputs depend on neither ``t`` nor ``p``: the
     ABA of a model without time-dependent forces or parameters; else None), for callers that
-    skip this object's frame (:func:`rnea`, :func:`aba`)."""
+    skip this object's frame (:func:`rnea`, :func:`aba`).  ``environment``: ``$NCGEN_CFLAGS``
+    as the environment held it when the door was last found good (:func:`door`)."""
 
-    __slots__ = ("model", "kernel", "fast", "tables", "flags", "free")
+    __slots__ = ("model", "kernel", "fast", "tables", "flags", "free", "environment")
 
     def __init__(self, model, name: str, kernels: str):
-        self.flags = _flags(None)
+        self.flags, self.environment = _flags(None), _cflags_key()
         k = self.kernel = kernel_of(model, name, kernels)
         self.model, self.tables = model, not isinstance(k, AlgorithmKernel)
         self.fast = k.door_caller(quaternion_offsets(model.joint_space))
@@ -332,13 +334,33 @@ def _depends_on_time_or_parameters(k: AlgorithmKernel) -> bool:
 
 def door(model, name: str, kernels: str = "auto") -> Door:
     """The :class:`Door` of the algorithm ``name`` of ``model`` with the kernels ``kernels``
-    (:func:`algorithm_kernels`), bound once per model; a door bound under ``$NCGEN_CFLAGS``
-    (-O0 in the test suite's fast tier) is bound again once they change, so that its kernel
-    is never kept for a run at ncgen's default flags."""
-    doors = model_data(model).doors
-    d = doors.get((name, kernels))
-    if d is None or (d.flags is not None and d.flags != os.environ.get("NCGEN_CFLAGS")):
-        d = doors[name, kernels] = Door(model, name, kernels)
+    (:func:`algorithm_kernels`), bound once per model and found in one dictionary lookup a
+    call (:data:`_BOUND`).  A door bound under ``$NCGEN_CFLAGS`` (-O0 in the test suite's
+    fast tier) is looked at again once they change and bound again if they differ from its
+    own (:func:`_bind`), so that its kernel is never kept for a run at ncgen's default flags."""
+    d = _BOUND.get((model, name, kernels))
+    if d is None or (d.flags is not None and d.environment is not _cflags_key()):
+        d = _bind(model, name, kernels)
+    return d
+
+
+#: ``{(model, name, kernels): Door}``: the bound doors (a door holds its model and its
+#: kernel, as the model's data holds them).
+_BOUND: dict = {}
+
+#: ``$NCGEN_CFLAGS`` as the environment holds it: the same object until the variable changes
+#: (:func:`ncgen.environment.key_reader`), so a door's check is one identity test.
+_cflags_key = key_reader("NCGEN_CFLAGS")
+
+
+def _bind(model, name: str, kernels: str) -> Door:
+    """The door of :func:`door`: kept when it was bound under ncgen's default flags or under
+    the present ``$NCGEN_CFLAGS``, else bound anew; marked with the environment's value."""
+    key = model, name, kernels
+    d = _BOUND.get(key)
+    if d is None or (d.flags is not None and d.flags != _flags(None)):
+        d = _BOUND[key] = Door(model, name, kernels)
+    d.environment = _cflags_key()
     return d
 
 
@@ -492,13 +514,18 @@ def _checked(model, k: AlgorithmKernel, args: tuple) -> list:
 def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``τ``: the efforts of the independent joint rates giving accelerations ``aj`` at
     ``(qj, vj)`` (module docstring; Pinocchio's ``rnea``)."""
-    return through(door(model, "rnea", kernels), qj, vj, aj, p, t, out)
+    return through(model, "rnea", kernels, qj, vj, aj, p, t, out)
 
 
-def through(d: Door, x, y, z, p, t: float, out):
-    """``d((x, y, z), p, t, out)``, straight to its C caller when it takes any time (``Door.free``)
-    and ``p`` is None; whatever that refuses, and a singular or non-finite result, takes the door
-    (whose checked path names the argument, or raises the kernel's :class:`ModelError`)."""
+def through(model, name: str, kernels: str, x, y, z, p, t: float, out):
+    """``door(model, name, kernels)((x, y, z), p, t, out)``, the door found as :func:`door`
+    finds it (inline: one Python frame less) and its C caller called straight when it takes
+    any time (``Door.free``) and ``p`` is None; whatever that refuses, and a singular or
+    non-finite result, takes the door (whose checked path names the argument, or raises the
+    kernel's :class:`ModelError`)."""
+    d = _BOUND.get((model, name, kernels))
+    if d is None or (d.flags is not None and d.environment is not _cflags_key()):
+        d = _bind(model, name, kernels)
     free = d.free
     if free is not None and p is None:
         try:
@@ -517,7 +544,7 @@ def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) 
 
 def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``aj``: joint accelerations under the efforts ``tau`` of the independent rates (Pinocchio's ``aba``)."""
-    return through(door(model, "aba", kernels), qj, vj, tau, p, t, out)
+    return through(model, "aba", kernels, qj, vj, tau, p, t, out)
 
 
 def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto",
