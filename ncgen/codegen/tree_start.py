@@ -18,6 +18,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.manifold import numerical_rank
 from ncgen.codegen.tree_kernels import JOINT_KINDS, LOCAL_MODES
 from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
 from ncgen.model.data import model_data
@@ -99,7 +100,7 @@ def _member_maps(js, name: str, C: np.ndarray):
         return None
     Jn = np.array(ca.evalf(J), float)
     c = np.array(ca.evalf(ca.substitute(local, x, ca.DM.zeros(12))), float).reshape(-1)
-    if np.linalg.matrix_rank(Jn) < 12:
+    if numerical_rank(Jn) < 12:
         return None
     Rc, pc = C[:9].reshape(3, 3, order="F"), C[9:]
     to_f, to_m = _right_product(Rc.T, -Rc.T @ pc), _right_product(Rc, pc)      # f_b = m C⁻¹, m = f_b C
