@@ -109,7 +109,7 @@ SIGNATURES = {
     "joint_run": c_binding.Signature("int", (
         (_T, "T"), (_D, "E"), ("int", "nu"), ("const ncgen_joint_options *", "options"), ("int", "n_out"),
         (_D, "t_out"), ("double *", "X"), (_D, "W"), (_D, "S"), ("int", "nquat"), ("const int *", "quat"),
-        ("double *", "stats"), ("int *", "k_done"))),
+        ("double *", "stats"), ("int *", "k_done"), ("double *", "work"))),
 }
 
 
@@ -645,6 +645,7 @@ class TableJointLoop:
         self._constants = (ptr(self.E), model.nu, ptr(self.quat))        # addresses taken once (µs each)
         self.tree = tree_function(model)
         self._maps: dict = {}
+        self._work = threading.local()
 
     def mapped(self, what: str, n: int):
         """``what`` (``"tree"``, ``"accel"``: CasADi functions mapped over ``n`` points;
@@ -656,6 +657,16 @@ class TableJointLoop:
             self._maps[key] = {"tree": self.tree, "accel": self.model.functions["accel"]}[what].map(n)
         return self._maps[key]
 
+    def work(self) -> tuple[np.ndarray, int]:
+        """The calling thread's work array of the loop (the library's ``work_size`` doubles) and
+        its address, made at its first run in that thread and kept: runs in one thread follow
+        each other, runs in other threads have their own (the loop needs no zeroed work)."""
+        work = getattr(self._work, "array", None)
+        if work is None:
+            array = np.zeros(self.tree_bound.work.size)
+            work = self._work.array = (array, array.ctypes.data)
+        return work
+
     def run(self, options: JointOptions, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray,
             stats: np.ndarray) -> tuple[int, int]:
         """As ``JointLoop.run`` (``p`` does not enter: the tables' dynamics take none)."""
@@ -665,7 +676,7 @@ class TableJointLoop:
         address = c_binding.address
         args = (self._fn, self.tree_bound.ref, E, nu, ctypes.addressof(options), len(t) - 1, address(t), address(X),
                 address(W), None if S is None else address(S), len(self.quat), quat, address(stats),
-                ctypes.addressof(done))
+                ctypes.addressof(done), self.work()[1])
         status, interrupted = call_interruptibly(*args, stop=options.stop.contents)
         if not interrupted and status == RUN_NO_FALLBACK:
             self.tree_bound.library.set_fallback()

@@ -295,7 +295,9 @@ int main(void) {
   /* the ODE: ẋ = [v; a(q, v, E w)] with E = [[1, 0], [0, 2]] (ni × nu, column-major) */
   {
     double x[6] = {0.3, -0.2, 0.7, 0.7, -1.1, 1.4}, xd[6], E[4] = {1.0, 0.0, 0.0, 2.0}, u[2] = {1.2, -0.2};
-    CHECK(ncgen_tree_ode(&KINDS, &T, E, 2, x, u, xd, check, work) == 0, "ode failed");
+    ncgen_tree_work s;
+    ncgen_tree_layout(&KINDS, &T, work, &s);
+    CHECK(ncgen_tree_ode_at(&KINDS, &T, &s, E, 2, x, u, xd, check) == 0, "ode failed");
     CHECK(close_to(xd[0], 0.7) && close_to(xd[1], -1.1) && close_to(xd[2], 1.4), "q̇ = v");
     CHECK(close_to(xd[3], 1.2 / M0) && close_to(xd[4], (-0.4 - bias1) / M1) && close_to(xd[5], 2 * xd[3]),
           "a = (%g, %g, %g)", xd[3], xd[4], xd[5]);

@@ -1300,12 +1300,11 @@ static int ncgen_tree_aba_derivatives(const ncgen_tree_kinds *K, const ncgen_tre
 }
 
 /* The joint-space ODE: x = [q_j; v_j] -> ẋ = [q̇_j(q_j, v_j); a_j(q_j, v_j, τ_i)] with the
- * efforts τ_i = E w of the inputs w (E: ni × nu, column-major); check as ncgen_tree_aba. */
-static int ncgen_tree_ode(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *E, int nu, const double *x,
-                          const double *w, double *xdot, double *check, double *work) {
-  ncgen_tree_work s;
+ * efforts τ_i = E w of the inputs w (E: ni × nu, column-major); check as ncgen_tree_aba; in the
+ * work s (ncgen_tree_layout: laid out once for a loop's run). */
+static int ncgen_tree_ode_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *E,
+                             int nu, const double *x, const double *w, double *xdot, double *check) {
   int b, i, j;
-  ncgen_tree_layout(K, T, work, &s);
   for (b = 0; b < T->nb; ++b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     if (!k->nq) continue;
@@ -1313,16 +1312,16 @@ static int ncgen_tree_ode(const ncgen_tree_kinds *K, const ncgen_tree *T, const 
       for (i = 0; i < k->nv; ++i) xdot[T->q_at[b] + i] = x[T->nq + T->v_at[b] + i];
       continue;
     }
-    for (i = 0; i < k->nq; ++i) s.in[i] = x[T->q_at[b] + i];
-    for (i = 0; i < k->nv; ++i) s.in[k->nq + i] = x[T->nq + T->v_at[b] + i];
-    if (ncgen_tree_call(k->qdot, s.in, xdot + T->q_at[b], s.kw)) return NCGEN_TREE_KERNEL;
+    for (i = 0; i < k->nq; ++i) s->in[i] = x[T->q_at[b] + i];
+    for (i = 0; i < k->nv; ++i) s->in[k->nq + i] = x[T->nq + T->v_at[b] + i];
+    if (ncgen_tree_call(k->qdot, s->in, xdot + T->q_at[b], s->kw)) return NCGEN_TREE_KERNEL;
   }
   for (i = 0; i < T->ni; ++i) {
     double t = 0.0;
     for (j = 0; j < nu; ++j) t += E[i + (long)T->ni * j] * w[j];
-    s.taui[i] = t;
+    s->taui[i] = t;
   }
-  return ncgen_tree_aba(K, T, x, x + T->nq, s.taui, xdot + T->nq, check, work);
+  return ncgen_tree_aba_at(K, T, s, x, x + T->nq, s->taui, xdot + T->nq, check);
 }
 
 #endif
