@@ -7,7 +7,7 @@ description as built (``model.members``, ``model.joints``, ``model.forces``,
 system as written is kept only to pickle it, ``model.recipe``), so editing the
 :class:`~ncgen.model.system.System` afterwards does not reach it, and its attributes and
 arrays cannot be reassigned or written.  What a run needs beyond it (loaded libraries, work
-arrays) lives in the runtime, keyed by the model.
+arrays) lives in its data, ``model.data`` (:mod:`ncgen.model.data`), outside its state.
 
 Numeric conveniences (``model.phi(q)``, ``model.A(q)``, ...) evaluate those functions with
 the default parameters and zero inputs unless told otherwise and return NumPy arrays.
