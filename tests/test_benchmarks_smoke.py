@@ -75,6 +75,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                              "RATIO ncgen / MuJoCo RK4, simulate only, DOPRI5", "agrees with Pinocchio"]),
     ("simulate_start_callgrind.py", ["=== panda: nc.simulate of one 1 ms output step from a new start",
                                      re.compile(r"this tree: +[\d,]+ instructions per call, start check")]),
+    ("door_callgrind.py", ["=== ur10: one call of each door at one state",
+                           re.compile(r"joint_forward_dynamics: this tree [\d,]+ instructions per call")]),
     ("simulate_fixed_cost.py", ["=== panda: nc.simulate of one 1 ms output step",
                                 "this tree: FIXED COST (simulate - loop), CPU",
                                 "this tree: FIXED COST, a new start each call, CPU", "load average at the end"]),
@@ -121,7 +123,7 @@ def test_smoke(script, expected):
         pytest.importorskip("yourdfpy")
     if script in ("step_jacobians.py", "joint_mpc.py", "joint_step_jacobians.py", "joint_ilqr_reach.py"):
         pytest.importorskip("yourdfpy")
-    if script in ("tree_tables_callgrind.py", "simulate_start_callgrind.py"):
+    if script in ("tree_tables_callgrind.py", "simulate_start_callgrind.py", "door_callgrind.py"):
         pytest.importorskip("pinocchio")     # with example-robot-data's URDFs
         pytest.importorskip("yourdfpy")
         if shutil.which("valgrind") is None:

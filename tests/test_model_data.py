@@ -7,6 +7,7 @@ import numpy as np
 
 import ncgen as nc
 from ncgen.model.data import ModelData, model_data
+from ncgen.model.model import model_state, restored_model
 
 
 def pendulum():
@@ -17,11 +18,14 @@ def pendulum():
 
 
 def test_one_data_object_per_model_outside_its_state():
+    """The data is kept on the model (``model._data``) but is no part of its stored state
+    (:func:`~ncgen.model.model.model_state`) nor of what its pickle sends."""
     m1, m2 = pendulum(), pendulum()
     assert isinstance(m1.data, ModelData)
     assert m1.data is m1.data is model_data(m1)
     assert m1.data is not m2.data
-    assert all(v is not m1.data for v in vars(m1).values())      # not part of the model's state
+    assert all(v is not m1.data for v in model_state(m1).values())
+    assert isinstance(restored_model(model_state(m1)).data, ModelData)
 
 
 def test_analysis_functions_are_kept_in_the_data():

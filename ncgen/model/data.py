@@ -3,9 +3,12 @@
 A :class:`~ncgen.model.model.Model` is constant.  Everything a process computes for it
 beyond the model itself — the compiled libraries, the kernels loaded from them, functions
 built on demand, the lazily built ``share=False`` form — lives in its :class:`ModelData`,
-``model.data`` (:func:`model_data`).  The data is keyed by the model object (a weak
-reference: it goes with the model), is never part of the model's pickled state, and is
-filled slot by slot on first use by the module that owns the slot.
+``model.data`` (:func:`model_data`).  The data is kept on the model (``model._data``, made
+with it), so it goes with the model: the cycles model → data → door → model are Python's
+cyclic GC's to collect, and no module-level dictionary holds a model or anything holding one
+(compiled libraries shared between models stay in their caches, which hold no model).  It is
+never part of the model's pickled or stored state, and is filled slot by slot on first use
+by the module that owns the slot.
 
 A model can have these compiled libraries (docs/architecture.md):
 
@@ -21,7 +24,6 @@ A model can have these compiled libraries (docs/architecture.md):
 """
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -63,6 +65,9 @@ class ModelData:
     #: library's algorithms bound to the model's tables, per the flags of the library's units
     #: (:func:`ncgen.runtime.tree_library.table_algorithm`, ``library_key``).
     table_algorithms: dict = field(default_factory=dict)
+    #: ``{(name, kernels): Door}``: the bound doors of the tree algorithms, found in one lookup
+    #: a call, ``model._data.doors.get((name, kernels))`` (:func:`ncgen.runtime.tree_algorithm_kernels.door`).
+    doors: dict = field(default_factory=dict)
     #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
     #: indices None when not (:func:`ncgen.runtime.tree_algorithm_kernels.rnea_applies`).
     algorithm_rates: tuple | None = None
@@ -136,25 +141,9 @@ class ModelData:
     store_key: str | None = None
 
 
-#: ``{id(model): (weak reference to the model, its ModelData)}``: a dictionary keyed by ``id``
-#: (one lookup, ~50 ns, where a ``WeakKeyDictionary`` builds a reference per lookup); an entry
-#: goes with its model.
-_DATA: dict = {}
-
-
 def model_data(model) -> ModelData:
-    """The :class:`ModelData` of ``model``, created empty on first use."""
-    entry = _DATA.get(id(model))
-    if entry is not None and entry[0]() is model:
-        return entry[1]
-    key, data = id(model), ModelData()
-
-    def gone(ref, key=key, entries=_DATA):
-        if entries.get(key, (None,))[0] is ref:
-            del entries[key]
-
-    _DATA[key] = (weakref.ref(model, gone), data)
-    return data
+    """The :class:`ModelData` of ``model`` (``model._data``, made with the model)."""
+    return model._data
 
 
 def cached(slot: dict, key, build: Callable[[], Any]):

@@ -7,7 +7,7 @@ description as built (``model.members``, ``model.joints``, ``model.forces``,
 system as written is kept only to pickle it, ``model.recipe``), so editing the
 :class:`~ncgen.model.system.System` afterwards does not reach it, and its attributes and
 arrays cannot be reassigned or written.  What a run needs beyond it (loaded libraries, work
-arrays) lives in the runtime, keyed by the model.
+arrays) lives in its data, ``model.data`` (:mod:`ncgen.model.data`), outside its state.
 
 Numeric conveniences (``model.phi(q)``, ``model.A(q)``, ...) evaluate those functions with
 the default parameters and zero inputs unless told otherwise and return NumPy arrays.
@@ -23,7 +23,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ncgen.errors import ModelError
-from ncgen.model.data import ModelData, model_data
+from ncgen.model.data import ModelData
 from ncgen.model.function_set import FunctionSet
 from ncgen.validation import as_vector
 
@@ -158,6 +158,7 @@ class Model:
         self.recipe = origin.recipe
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
+        object.__setattr__(self, "_data", ModelData())
         object.__setattr__(self, "_frozen", True)
 
     def _describe(self, system) -> None:
@@ -233,7 +234,7 @@ class Model:
     def data(self) -> ModelData:
         """The model's run-time data: compiled libraries, loaded kernels, functions built on
         demand (:class:`~ncgen.model.data.ModelData`); not part of the constant model."""
-        return model_data(self)
+        return self._data
 
     def frame_pose(self, name: str, q) -> tuple[np.ndarray, np.ndarray]:
         """World ``(R, p)`` of the named frame (``model.frames``, e.g. a URDF link) at ``q``."""
@@ -480,7 +481,7 @@ def content_hash(model: Model) -> str:
 def model_state(model: Model) -> dict:
     """The attributes of ``model`` (what :func:`restored_model` makes it from again), for a
     store of built models (:mod:`ncgen.codegen.model_cache`); pickling goes by description."""
-    return {k: v for k, v in vars(model).items() if k != "_frozen"}
+    return {k: v for k, v in vars(model).items() if k not in ("_frozen", "_data")}
 
 
 def restored_model(state: dict) -> Model:
@@ -489,6 +490,7 @@ def restored_model(state: dict) -> Model:
     model = object.__new__(Model)
     for key, value in state.items():
         object.__setattr__(model, key, _frozen(value))
+    object.__setattr__(model, "_data", ModelData())
     object.__setattr__(model, "_frozen", True)
     return model
 

@@ -102,7 +102,7 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
 def _rnea_gives(model, joints: str) -> bool:
     """Whether the compiled RNEA (:func:`~ncgen.runtime.tree_algorithm_kernels.rnea`) gives the
     efforts ``joints`` asks for (a 3D tree whose asked-for efforts are those of its independent
-    joint rates), decided once per model; a yes is also kept in :data:`_RNEA_GIVES`."""
+    joint rates), decided once per model (the model's ``data.rnea_efforts``)."""
     if joints not in ("actuated", "all"):
         raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
     data = model_data(model)
@@ -113,14 +113,7 @@ def _rnea_gives(model, joints: str) -> bool:
         actuated = [i for n in js.joint_names if n in model.actuated_joints for i in range(sv[n].start, sv[n].stop)]
         takes = data.rnea_efforts[joints] = independent is not None and (
             independent == actuated if joints == "actuated" else len(independent) == js.nv)
-    if takes:
-        _RNEA_GIVES.add((model, joints))
     return takes
-
-
-#: ``{(model, joints)}`` where :func:`_rnea_gives` said yes: one set lookup a call (the RNEA's
-#: door holds the model as long).
-_RNEA_GIVES: set = set()
 
 
 def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated", *,
@@ -133,7 +126,7 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     (:func:`~ncgen.runtime.tree_algorithm_kernels.rnea`, from the tree tables when they cover the model) when the efforts asked for are those of the
     independent joint rates; other models solve the constrained equations of motion.
     ``out``: an array of the efforts' size written and returned (float64, C-contiguous)."""
-    if (model, joints) in _RNEA_GIVES or _rnea_gives(model, joints):
+    if model._data.rnea_efforts.get(joints) or _rnea_gives(model, joints):
         return through(model, "rnea", "auto", qj, vj, aj, p, t, out)
     t = float(t)
     js = model.joint_space

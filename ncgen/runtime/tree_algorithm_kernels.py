@@ -335,18 +335,14 @@ def _depends_on_time_or_parameters(k: AlgorithmKernel) -> bool:
 def door(model, name: str, kernels: str = "auto") -> Door:
     """The :class:`Door` of the algorithm ``name`` of ``model`` with the kernels ``kernels``
     (:func:`algorithm_kernels`), bound once per model and found in one dictionary lookup a
-    call (:data:`_BOUND`).  A door bound under ``$NCGEN_CFLAGS`` (-O0 in the test suite's
+    call (the model's ``data.doors``).  A door bound under ``$NCGEN_CFLAGS`` (-O0 in the test suite's
     fast tier) is looked at again once they change and bound again if they differ from its
     own (:func:`_bind`), so that its kernel is never kept for a run at ncgen's default flags."""
-    d = _BOUND.get((model, name, kernels))
+    d = model._data.doors.get((name, kernels))
     if d is None or (d.flags is not None and d.environment is not _cflags_key()):
         d = _bind(model, name, kernels)
     return d
 
-
-#: ``{(model, name, kernels): Door}``: the bound doors (a door holds its model and its
-#: kernel, as the model's data holds them).
-_BOUND: dict = {}
 
 #: ``$NCGEN_CFLAGS`` as the environment holds it: the same object until the variable changes
 #: (:func:`ncgen.environment.key_reader`), so a door's check is one identity test.
@@ -356,10 +352,10 @@ _cflags_key = key_reader("NCGEN_CFLAGS")
 def _bind(model, name: str, kernels: str) -> Door:
     """The door of :func:`door`: kept when it was bound under ncgen's default flags or under
     the present ``$NCGEN_CFLAGS``, else bound anew; marked with the environment's value."""
-    key = model, name, kernels
-    d = _BOUND.get(key)
+    doors, key = model_data(model).doors, (name, kernels)
+    d = doors.get(key)
     if d is None or (d.flags is not None and d.flags != _flags(None)):
-        d = _BOUND[key] = Door(model, name, kernels)
+        d = doors[key] = Door(model, name, kernels)
     d.environment = _cflags_key()
     return d
 
@@ -523,7 +519,7 @@ def through(model, name: str, kernels: str, x, y, z, p, t: float, out):
     any time (``Door.free``) and ``p`` is None; whatever that refuses, and a singular or
     non-finite result, takes the door (whose checked path names the argument, or raises the
     kernel's :class:`ModelError`)."""
-    d = _BOUND.get((model, name, kernels))
+    d = model._data.doors.get((name, kernels))
     if d is None or (d.flags is not None and d.environment is not _cflags_key()):
         d = _bind(model, name, kernels)
     free = d.free

@@ -139,11 +139,6 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
     return cached(model_data(model).tree_kernels, (method, cflags), build)
 
 
-#: ``{model: JointDynamicsKernel}``: ``nc.joint_forward_dynamics``' own kernel (the model's
-#: ``data.tree_kernel``, which holds the model), found in one dictionary lookup a call.
-_OWN: dict = {}
-
-
 def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, backend: str = "compiled",
                            out=None) -> np.ndarray:
     """Joint accelerations ``a_j`` (``model.joint_names`` order; a free base: ``[a, α]`` in
@@ -153,8 +148,8 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
     use), else the ``"numpy"`` path: ``from_joint_space``, the KKT solve of
     :func:`~ncgen.runtime.dynamics_at_state.forward_dynamics`, ``to_joint_space``.
     ``out``: an array of ``nv`` values written and returned (float64, C-contiguous)."""
-    k = _OWN.get(model)
-    if backend == "compiled" and k is not None and k._door is not None:
+    k = model._data.tree_kernel
+    if backend == "compiled" and k and k._door is not None:
         k._at(t, p)                 # arguments straight to C, checked there; the messages below only on failure
         try:
             a = k._door(qj, vj, k._zero_u if u is None else u, out)
@@ -181,7 +176,6 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
                 data.tree_kernel = False
         k = data.tree_kernel
         if k:
-            _OWN[model] = k
             k.set(t=t, p=p)
             a = k(qj, vj, u).copy()
             return a if out is None else write_out(out, a, "joint_forward_dynamics")

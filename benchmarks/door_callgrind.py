@@ -1,0 +1,88 @@
+"""Instructions per call of the tree algorithms' doors on the UR10 (issue 59: the model's data
+kept on the model, the doors found through ``model._data.doors``, must cost no more than the
+module dictionary keyed by the model did): ``nc.aba``, ``nc.rnea``, ``nc.inverse_dynamics``
+and ``nc.joint_forward_dynamics`` at one state, counted by valgrind's callgrind (deterministic,
+unaffected by the load): 200 uncounted calls, then the instrumentation switched on
+(``callgrind_control -i on``) for ``--calls`` calls.  Printed per door: instructions per call
+for this tree and ``--before DIR``, with ``RATIO`` lines (target ≤ 1.02).
+
+    python benchmarks/door_callgrind.py [--before DIR] [--calls 2000] [--smoke]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import machine  # noqa: E402
+
+CHILD = r"""
+import os, subprocess, sys, importlib.metadata as md
+import numpy as np
+import ncgen as nc
+
+rel = "ur_description/urdf/ur10_robot.urdf"
+model = nc.System.from_urdf(next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))).build()
+n = model.joint_space.nv
+q, v, w = np.linspace(-0.8, 0.9, n), np.linspace(0.3, -0.2, n), np.linspace(-1.0, 1.0, n)
+door, calls = sys.argv[1], int(sys.argv[2])
+call = {"aba": lambda: nc.aba(model, q, v, w), "rnea": lambda: nc.rnea(model, q, v, w),
+        "inverse_dynamics": lambda: nc.inverse_dynamics(model, q, v, w),
+        "joint_forward_dynamics": lambda: nc.joint_forward_dynamics(model, q, v, w)}[door]
+for _ in range(200):
+    call()
+switch = lambda on: subprocess.run(["callgrind_control", "-i", on, str(os.getpid())], check=True, capture_output=True)
+switch("on")
+for _ in range(calls):
+    call()
+switch("off")
+"""
+DOORS = ("aba", "rnea", "inverse_dynamics", "joint_forward_dynamics")
+
+
+def counted(tree: Path, door: str, calls: int) -> float:
+    """Instructions per call of ``door`` on ``tree`` (the child's counted loop)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    subprocess.run([sys.executable, "-c", CHILD, door, "2"], env=env, cwd=tree, check=True, capture_output=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "callgrind.out"
+        subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}",
+                        sys.executable, "-c", CHILD, door, str(calls)], env=env, cwd=tree, check=True,
+                       capture_output=True)
+        text = subprocess.run(["callgrind_annotate", "--threshold=100", str(out)],
+                              capture_output=True, text=True, check=True).stdout
+    total = next(int(m.group(1).replace(",", "")) for row in text.splitlines()
+                 if (m := re.match(r"\s*([\d,]+)\s+\([^)]*\)\s+PROGRAM TOTALS", row)))
+    return total / calls
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--before", type=Path, help="another ncgen tree to compare with (its root directory)")
+    ap.add_argument("--calls", type=int, default=2000)
+    ap.add_argument("--smoke", action="store_true", help="2 calls (CI)")
+    a = ap.parse_args(argv)
+    print(machine())
+    if shutil.which("valgrind") is None or shutil.which("callgrind_control") is None:
+        print("valgrind's callgrind is not installed: nothing counted")
+        return
+    calls = 2 if a.smoke else a.calls
+    trees = {"this tree": ROOT} | ({"before": a.before.resolve()} if a.before else {})
+    print(f"\n=== ur10: one call of each door at one state, {calls} calls counted")
+    for door in DOORS:
+        got = {name: counted(tree, door, calls) for name, tree in trees.items()}
+        print(f"  {door}: " + ", ".join(f"{name} {c:,.0f}" for name, c in got.items()) + " instructions per call")
+        if a.before:
+            print(f"  RATIO this tree / before, {door}: {got['this tree'] / got['before']:.4f}")
+
+
+if __name__ == "__main__":
+    main()
