@@ -45,3 +45,19 @@ def test_the_data_goes_with_its_model():
     del model
     gc.collect()
     assert ref() is None
+
+
+def test_anything_but_a_model_is_refused_naming_what_it_is():
+    """The doors read the model's data first: a string, None or a number in the model's
+    place is refused with a ModelError that names it, not an AttributeError from inside."""
+    import pytest
+    from ncgen.errors import ModelError
+    z = np.zeros(2)
+    calls = {"aba": lambda m: nc.aba(m, z, z, z), "rnea": lambda m: nc.rnea(m, z, z, z),
+             "inverse_dynamics": lambda m: nc.inverse_dynamics(m, z, z, z),
+             "joint_forward_dynamics": lambda m: nc.joint_forward_dynamics(m, z, z),
+             "model_data": model_data}
+    for name, call in calls.items():
+        for bad, shown in (("panda.urdf", "str 'panda.urdf'"), (None, "NoneType None"), (3, "int 3")):
+            with pytest.raises(ModelError, match=f"expected an ncgen model .* got {shown}"):
+                call(bad)

@@ -142,8 +142,13 @@ class ModelData:
 
 
 def model_data(model) -> ModelData:
-    """The :class:`ModelData` of ``model`` (``model._data``, made with the model)."""
-    return model._data
+    """The :class:`ModelData` of ``model`` (``model._data``, made with the model); anything
+    but a model is refused, naming what it is."""
+    try:
+        return model._data
+    except AttributeError:
+        raise ModelError(f"expected an ncgen model (nc.System(...).build(), or System.from_urdf(...).build()), "
+                         f"got {type(model).__name__} {model!r:.60}") from None
 
 
 def cached(slot: dict, key, build: Callable[[], Any]):

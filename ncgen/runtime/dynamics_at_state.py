@@ -126,7 +126,11 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     (:func:`~ncgen.runtime.tree_algorithm_kernels.rnea`, from the tree tables when they cover the model) when the efforts asked for are those of the
     independent joint rates; other models solve the constrained equations of motion.
     ``out``: an array of the efforts' size written and returned (float64, C-contiguous)."""
-    if model._data.rnea_efforts.get(joints) or _rnea_gives(model, joints):
+    try:
+        gives = model._data.rnea_efforts.get(joints)
+    except AttributeError:                  # not a model: model_data names what it is
+        gives = model_data(model).rnea_efforts.get(joints)
+    if gives or _rnea_gives(model, joints):
         return through(model, "rnea", "auto", qj, vj, aj, p, t, out)
     t = float(t)
     js = model.joint_space

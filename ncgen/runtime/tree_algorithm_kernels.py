@@ -338,7 +338,10 @@ def door(model, name: str, kernels: str = "auto") -> Door:
     call (the model's ``data.doors``).  A door bound under ``$NCGEN_CFLAGS`` (-O0 in the test suite's
     fast tier) is looked at again once they change and bound again if they differ from its
     own (:func:`_bind`), so that its kernel is never kept for a run at ncgen's default flags."""
-    d = model._data.doors.get((name, kernels))
+    try:
+        d = model._data.doors.get((name, kernels))
+    except AttributeError:                  # not a model: model_data names what it is
+        d = model_data(model).doors.get((name, kernels))
     if d is None or (d.flags is not None and d.environment is not _cflags_key()):
         d = _bind(model, name, kernels)
     return d
@@ -519,7 +522,10 @@ def through(model, name: str, kernels: str, x, y, z, p, t: float, out):
     any time (``Door.free``) and ``p`` is None; whatever that refuses, and a singular or
     non-finite result, takes the door (whose checked path names the argument, or raises the
     kernel's :class:`ModelError`)."""
-    d = model._data.doors.get((name, kernels))
+    try:
+        d = model._data.doors.get((name, kernels))
+    except AttributeError:                  # not a model: model_data names what it is
+        d = model_data(model).doors.get((name, kernels))
     if d is None or (d.flags is not None and d.environment is not _cflags_key()):
         d = _bind(model, name, kernels)
     free = d.free

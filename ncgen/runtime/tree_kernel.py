@@ -148,7 +148,10 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
     use), else the ``"numpy"`` path: ``from_joint_space``, the KKT solve of
     :func:`~ncgen.runtime.dynamics_at_state.forward_dynamics`, ``to_joint_space``.
     ``out``: an array of ``nv`` values written and returned (float64, C-contiguous)."""
-    k = model._data.tree_kernel
+    try:
+        k = model._data.tree_kernel
+    except AttributeError:                  # not a model: model_data names what it is
+        k = model_data(model).tree_kernel
     if backend == "compiled" and k and k._door is not None:
         k._at(t, p)                 # arguments straight to C, checked there; the messages below only on failure
         try:
