@@ -6,9 +6,10 @@ e.g. ``git archive`` of an older commit) the same run of both trees is timed in 
 processes started in alternation, ``--rounds`` each (interleaved: the load falls on both),
 each child timing ``--calls`` calls after a warm-up; min and median of the rounds and of their
 ratios (this tree / before) are printed.  The same calls from a new start each (``q0`` moved by
-1e-3 rad per joint and call) time the start check that a repeated start skips.
+1e-3 rad per joint and call) time the start check that a repeated start skips.  ``--urdf stock``:
+the Panda as shipped (its second finger mimics the first) in place of the fall's.
 
-    python benchmarks/simulate_fixed_cost.py [--before DIR] [--rounds 7] [--calls 200]
+    python benchmarks/simulate_fixed_cost.py [--before DIR] [--rounds 7] [--calls 200] [--urdf fall|stock]
 """
 from __future__ import annotations
 
@@ -35,10 +36,21 @@ import ncgen as nc
 
 rel = "panda_description/urdf/panda.urdf"
 path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
-text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", open(path).read()))
+text = open(path).read()
+stock = sys.argv[2] == "stock"
+if not stock:                           # the fall's model (benchmarks/joint_simulation.py)
+    text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
 model = nc.System.from_urdf(text).build()
 js = model.joint_space
-q0, v0 = model.from_joint_space(np.linspace(-0.8, 0.9, js.nq), np.zeros(js.nv))
+sl = js.slices()
+
+def start(k):
+    qj = np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k
+    if stock:                           # the second finger where its mimic map puts it
+        qj[sl["panda_finger_joint2"]] = qj[sl["panda_finger_joint1"]]
+    return model.from_joint_space(qj, np.zeros(js.nv))
+
+q0, v0 = start(0)
 run = lambda: nc.simulate(model, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-3, atol=1e-3)
 for _ in range(20):
     tr = run()
@@ -48,7 +60,7 @@ for _ in range(calls):
     run()
 out = {"cpu": (time.process_time() - c) / calls, "wall": (time.perf_counter() - w) / calls,
        "kernels": tr.info["kernels"], "stats": tr.info["stats"], "file": nc.__file__}
-starts = [model.from_joint_space(np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k, np.zeros(js.nv)) for k in range(calls)]
+starts = [start(k) for k in range(calls)]
 c = time.process_time()
 for q, v in starts:                     # a new start each call: its start check is not kept from an earlier run
     nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3)
@@ -72,9 +84,9 @@ print(json.dumps(out))
 """
 
 
-def child(tree: Path, calls: int) -> dict:
+def child(tree: Path, calls: int, urdf: str) -> dict:
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    out = subprocess.run([sys.executable, "-c", CHILD, str(calls)], env=env, cwd=tree, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", CHILD, str(calls), urdf], env=env, cwd=tree, capture_output=True, text=True,
                          check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
@@ -88,6 +100,9 @@ def main(argv=None) -> None:
     ap.add_argument("--before", type=Path, help="another ncgen tree to compare with (its root directory)")
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--calls", type=int, default=200)
+    ap.add_argument("--urdf", choices=("fall", "stock"), default="fall",
+                    help="the Panda of joint_simulation.py's fall (its <mimic> and <dynamics> tags dropped, as for "
+                         "MuJoCo; the default), or as shipped (its second finger mimics the first)")
     ap.add_argument("--smoke", action="store_true", help="2 rounds of 20 calls (CI)")
     a = ap.parse_args(argv)
     if a.smoke:
@@ -98,8 +113,8 @@ def main(argv=None) -> None:
     results = {k: [] for k in trees}
     for _ in range(a.rounds):
         for name, tree in trees.items():
-            results[name].append(child(tree, a.calls))
-    print(f"\n=== panda: nc.simulate of one 1 ms output step (DOPRI5, rtol = atol = 1e-3), {a.calls} calls "
+            results[name].append(child(tree, a.calls, a.urdf))
+    print(f"\n=== panda ({'the URDF as shipped' if a.urdf == 'stock' else 'the fall' + chr(39) + 's URDF'}): nc.simulate of one 1 ms output step (DOPRI5, rtol = atol = 1e-3), {a.calls} calls "
           f"per round, {a.rounds} rounds")
     for name, rs in results.items():
         print(f"  {name}: {rs[0]['file']} (kernels {rs[0]['kernels']}, {rs[0]['stats']})")

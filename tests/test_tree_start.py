@@ -41,13 +41,17 @@ def kinds_tree() -> nc.Model:
     return s.build()
 
 
-def robot(name: str) -> nc.Model:
+def robot(name: str, mimic: bool = False) -> nc.Model:
+    """The robot of example-robot-data, as shipped with ``mimic`` (the Panda's second finger
+    mimics its first), else without its ``<mimic>`` and ``<dynamics>`` tags."""
     rel = {"panda": "panda_description/urdf/panda.urdf", "ur10": "ur_description/urdf/ur10_robot.urdf"}[name]
     try:
         path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
     except (md.PackageNotFoundError, StopIteration, TypeError):
         pytest.skip("example-robot-data is not installed")
-    text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", open(path).read()))
+    text = open(path).read()
+    if not mimic:
+        text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
     return nc.System.from_urdf(text).build()
 
 
@@ -112,6 +116,36 @@ def test_the_start_check_equals_casadis_on_robots(name):
     assert_equal_to_casadi(robot(name), 7)
 
 
+@pytest.mark.slow
+def test_a_mimic_joint_is_checked_through_the_tables_mimic_map():
+    """The Panda as shipped (its second finger mimics the first): starts on the tree with the
+    fingers as the mimic map puts them are accepted as CasADi's check accepts them, with its
+    joint state (1e-12); the same start with the second finger moved or moving alone by 1e-6
+    (a rigid tree that breaks only the mimic relation, made on the Panda without its ``<mimic>``
+    tag, whose coordinates are the same) is refused by both."""
+    stock, free = robot("panda", mimic=True), robot("panda")
+    a, js, ts = bound_tree(stock).tables.arrays, stock.joint_space, tree_start(stock)
+    dep = np.flatnonzero(a["q_src"] >= 0)
+    assert dep.size == 1 and stock.nq == free.nq
+    rng = np.random.default_rng(11)
+    for _ in range(3):
+        qj, vj = rng.uniform(-2.5, 2.5, js.nq), rng.uniform(-3, 3, js.nv)
+        qj[dep] = a["q_coef"][dep] * qj[a["q_src"][dep]] + a["q_off"][dep]
+        vj = a["rate_coef"] * vj[a["rate_src"]]
+        q, v = stock.from_joint_space(qj, vj)
+        check, qc, vc = ts(q, v)
+        assert _tree_holding(check) and js._holds(stock, q, v, stock.t0, stock.p0)
+        qr, vr = js.state(stock, q, v)
+        np.testing.assert_allclose(qc, np.ravel(qr), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(vc, np.ravel(vr), rtol=0, atol=1e-12)
+        for moved_q in (True, False):
+            qb, vb = qj.copy(), vj.copy()
+            (qb if moved_q else vb)[dep] += 1e-6
+            q2, v2 = free.from_joint_space(qb, vb)
+            assert not _tree_holding(ts(q2, v2)[0])
+            assert not js._holds(stock, q2, v2, stock.t0, stock.p0)
+
+
 def _moved_to(model, ts, q, v, which: int, ratio: float):
     """``(q, v)`` moved along a fixed random direction of ``q`` (which 0) or ``v`` (1) so that
     the check's distance is ``ratio`` times its tolerance (the distance is linear in the move)."""
@@ -171,8 +205,8 @@ def test_simulate_takes_the_c_check_after_the_first_run_and_runs_as_from_casadis
 
 
 def test_trees_the_check_does_not_take_are_named_and_keep_casadis_check():
-    """Spherical and free joints, mimic joints: refused by name; no TreeStart, and the start
-    check is CasADi's."""
+    """Spherical and free joints: refused by name; no TreeStart, and the start check is
+    CasADi's."""
     s = nc.System("start_uncovered", gravity=(0.0, 0.0, -9.81))
     b = [s.add_body(f"b{k}", mass=1.0, inertia=np.diag([0.02, 0.03, 0.04]), position=(0.4 * k + 0.2, 0, 0))
          for k in range(3)]

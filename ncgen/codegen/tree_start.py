@@ -9,7 +9,7 @@ the member's coordinates are points and directions fixed in it,
 
 :func:`start_tables` raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree` naming why the
 check does not cover a tree (the caller keeps CasADi's check): a joint other than revolute,
-prismatic and fixed, mimic joints, parameters, a member whose coordinates are not 12 fixed
+prismatic and fixed, parameters, a member whose coordinates are not 12 fixed
 points and directions spanning its frame, constraints beyond the tree's own (drives, distances).
 The ``num`` rows are ``NCGEN_TREE_START_NUM`` (324) doubles.
 """
@@ -49,11 +49,10 @@ def _pack(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     js, a = model.joint_space, tables.arrays
     reasons = [f"joint kind {JOINT_KINDS[k].name}" for k in sorted(set(a["kind"].tolist()))
                if JOINT_KINDS[k].name not in START_KINDS]
-    if np.any(a["q_src"] >= 0) or np.any(a["rate_src"] != np.arange(tables.nv)):
-        reasons.append("mimic joints")
     if model.np:
         reasons.append("parameters (the tables hold the model's numbers)")
-    if model.nq - model.nc != js.nv:
+    mimicked = int(np.count_nonzero(a["rate_src"] != np.arange(tables.nv)))     # rates a mimic map gives
+    if model.nq - model.nc != js.nv - mimicked:
         reasons.append(f"{model.nc} constraints for {model.nq} coordinates and {js.nv} joint rates "
                        "(constraints beyond the tree's own)")
     members = [there for _, there, _, _ in js.spanning_tree()]

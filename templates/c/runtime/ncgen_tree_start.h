@@ -1,11 +1,13 @@
 /* A run's start on a tree: whether natural coordinates (q, v) hold every constraint, and the joint state
  * (q_j, v_j) they stand for, in one pass over the tables of ncgen_tree_tables.h and the members' coordinate
  * maps (packed by ncgen/codegen/tree_start.py) — the check ncgen/assembly/joint_space.py's
- * JointSpace._checked_state makes, for trees of revolute, prismatic and fixed joints without mimic joints.
+ * JointSpace._checked_state makes, for trees of revolute, prismatic and fixed joints (mimic joints included).
  *
  * A tree's constraints hold at (q, v) iff q is the natural coordinates of the tree at some joint positions and
  * v their rate.  So: extract (q_j, v_j) from (q, v) joint by joint, map them forward through the tree, and
  * compare: check = [max |q − q(q_j)|, max |v − v(q_j, v_j)|, max |q|, max |v|, Σ (q, v, both differences)]
+ * (a mimic joint's position and rate, read off like the others, also compared with its source's through the
+ * tables' mimic map: those differences count in the first two)
  * (the sum finite only if every value is).
  *
  * Poses are 12 doubles [R (3×3, column-major); p], rates the same 12 of their time derivative.  Per body b
@@ -141,6 +143,18 @@ static int ncgen_tree_start_state(const ncgen_tree_kinds *K, const ncgen_tree_st
       sum += d + dv;
     }
   }
+  for (i = 0; T->q_src && i < T->nq; ++i)        /* mimic joints: q_j[i] = q_coef q_j[q_src] + q_off (the map's) */
+    if (T->q_src[i] >= 0) {
+      double d = fabs(qj[i] - (T->q_coef[i] * qj[T->q_src[i]] + T->q_off[i]));
+      e_q = d > e_q ? d : e_q;
+      sum += d;
+    }
+  for (i = 0; T->rate_src && i < T->nv; ++i)     /* and v_j[i] = rate_coef v_j[rate_src] */
+    if (T->rate_src[i] != i) {
+      double d = fabs(vj[i] - T->rate_coef[i] * vj[T->rate_src[i]]);
+      e_v = d > e_v ? d : e_v;
+      sum += d;
+    }
   for (i = 0; i < n; ++i) {
     double a = fabs(q[i]), c = fabs(v[i]);
     q_max = a > q_max ? a : q_max;
