@@ -27,7 +27,10 @@ import resource
 import shutil
 import signal
 import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -49,6 +52,22 @@ def terminal_sigint() -> None:
 
 
 # ---------------------------------------------------------------- machine
+def callgrind_rows(code: str, args: list[str], tree) -> list[tuple[int, str]]:
+    """``(inclusive instructions, function)`` rows of ``callgrind_annotate`` for ``python -c code
+    *args`` run under valgrind's callgrind on the ncgen ``tree`` (``PYTHONPATH``), counting only
+    while the child switches the instrumentation on (``callgrind_control -i on``); the program's
+    total is the row named ``PROGRAM TOTALS``.  Rows of fewer than 100 instructions are left out."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "callgrind.out"
+        subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}",
+                        sys.executable, "-c", code, *args], env=env, cwd=tree, check=True, capture_output=True)
+        text = subprocess.run(["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(out)],
+                              capture_output=True, text=True, check=True).stdout
+    return [(int(m.group(1).replace(",", "")), m.group(2)) for row in text.splitlines()
+            if (m := re.match(r"\s*([\d,]+)\s+\([^)]*\)\s+(.*)", row))]
+
+
 def machine() -> str:
     """CPU, cores, memory and the versions that matter, one line each."""
     lines = []

@@ -12,17 +12,15 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine  # noqa: E402
+from common import callgrind_rows, machine  # noqa: E402
 
 CHILD = r"""
 import os, subprocess, sys, importlib.metadata as md
@@ -52,16 +50,8 @@ def counted(tree: Path, door: str, calls: int) -> float:
     """Instructions per call of ``door`` on ``tree`` (the child's counted loop)."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     subprocess.run([sys.executable, "-c", CHILD, door, "2"], env=env, cwd=tree, check=True, capture_output=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "callgrind.out"
-        subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}",
-                        sys.executable, "-c", CHILD, door, str(calls)], env=env, cwd=tree, check=True,
-                       capture_output=True)
-        text = subprocess.run(["callgrind_annotate", "--threshold=100", str(out)],
-                              capture_output=True, text=True, check=True).stdout
-    total = next(int(m.group(1).replace(",", "")) for row in text.splitlines()
-                 if (m := re.match(r"\s*([\d,]+)\s+\([^)]*\)\s+PROGRAM TOTALS", row)))
-    return total / calls
+    rows = callgrind_rows(CHILD, [door, str(calls)], tree)
+    return next(n for n, name in rows if "PROGRAM TOTALS" in name) / calls
 
 
 def main(argv=None) -> None:

@@ -11,18 +11,14 @@ on``) for ``--calls`` calls.  Printed per call: all instructions, and those of t
 from __future__ import annotations
 
 import argparse
-import os
-import re
 import shutil
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine  # noqa: E402
+from common import callgrind_rows, machine  # noqa: E402
 
 CHILD = r"""
 import os, re, subprocess, sys, importlib.metadata as md
@@ -51,20 +47,9 @@ START_CHECK = ("casadi::SXFunction::eval", "ncgen_tree_start_state")
 
 def counted(tree: Path, calls: int) -> tuple[float, float]:
     """``(instructions per call, of them the start check's)`` of the child on ``tree``."""
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "callgrind.out"
-        env = {**os.environ, "PYTHONPATH": str(tree)}
-        subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}",
-                        sys.executable, "-c", CHILD, str(calls)], env=env, cwd=tree, check=True, capture_output=True)
-        text = subprocess.run(["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(out)],
-                              capture_output=True, text=True, check=True).stdout
-    total = start = 0
-    for row in text.splitlines():
-        m = re.match(r"\s*([\d,]+)\s+\([^)]*\)\s+(.*)", row)
-        if m and "PROGRAM TOTALS" in m.group(2):
-            total = int(m.group(1).replace(",", ""))
-        elif m and any(f":{name}" in m.group(2) for name in START_CHECK):
-            start += int(m.group(1).replace(",", ""))
+    rows = callgrind_rows(CHILD, [str(calls)], tree)
+    total = next(n for n, name in rows if "PROGRAM TOTALS" in name)
+    start = sum(n for n, name in rows if any(f":{f}" in name for f in START_CHECK))
     return total / calls, start / calls
 
 
