@@ -1,4 +1,4 @@
-"""``nc.simulate``'s fixed cost on a 7-DOF tree (issue 37): a Panda run of one output step of
+"""``nc.simulate``'s fixed cost on a tree (issue 37): a Panda run of one output step of
 1 ms (``t_end = dt = 1e-3`` s, DOPRI5 at rtol = atol = 1e-3: two steps of the C loop), its
 CPU and wall time per call, and the C loop's share (the same grid integrated by the loop
 alone); the fixed cost is the difference.  With ``--before DIR`` (a checkout of another ncgen,
@@ -7,9 +7,12 @@ processes started in alternation, ``--rounds`` each (interleaved: the load falls
 each child timing ``--calls`` calls after a warm-up; min and median of the rounds and of their
 ratios (this tree / before) are printed.  The same calls from a new start each (``q0`` moved by
 1e-3 rad per joint and call) time the start check that a repeated start skips.  ``--urdf stock``:
-the Panda as shipped (its second finger mimics the first) in place of the fall's.
+the Panda as shipped (its second finger mimics the first) in place of the fall's.  ``--model talos``:
+Talos reduced of example-robot-data as shipped, on a free-flyer base (a floating-base tree: free,
+revolute and fixed joints); ``--model balls``: a chain of 4 bodies on spherical joints.
 
     python benchmarks/simulate_fixed_cost.py [--before DIR] [--rounds 7] [--calls 200] [--urdf fall|stock]
+                                             [--model panda|talos|balls]
 """
 from __future__ import annotations
 
@@ -34,13 +37,23 @@ import importlib.metadata as md
 import numpy as np
 import ncgen as nc
 
-rel = "panda_description/urdf/panda.urdf"
-path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
-text = open(path).read()
-stock = sys.argv[2] == "stock"
-if not stock:                           # the fall's model (benchmarks/joint_simulation.py)
-    text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
-model = nc.System.from_urdf(text).build()
+which = sys.argv[2]
+rel = {"talos": "talos_data/robots/talos_reduced.urdf"}.get(which, "panda_description/urdf/panda.urdf")
+stock = which == "stock"
+if which == "balls":                    # a chain of 4 bodies on spherical joints, hanging from the ground
+    s = nc.System("balls", gravity=(0.0, 0.0, -9.81))
+    prev = s.ground
+    for k in range(4):
+        b = s.add_body(f"b{k}", mass=1.0, inertia=np.diag([0.02, 0.03, 0.04]), position=(0.3 * k + 0.15, 0, 0))
+        s.add_joint(nc.Spherical(prev, b, at=(0.3 * k, 0, 0), name=f"ball{k}"))
+        prev = b
+    model = s.build()
+else:
+    path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
+    text = open(path).read()
+    if which == "fall":                 # the fall's model (benchmarks/joint_simulation.py)
+        text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
+    model = nc.System.from_urdf(text, floating_base=which == "talos").build()
 js = model.joint_space
 sl = js.slices()
 
@@ -48,7 +61,7 @@ def start(k):
     qj = np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k
     if stock:                           # the second finger where its mimic map puts it
         qj[sl["panda_finger_joint2"]] = qj[sl["panda_finger_joint1"]]
-    return model.from_joint_space(qj, np.zeros(js.nv))
+    return model.from_joint_space(qj, np.zeros(js.nv))     # (quaternions normalised by from_joint_space)
 
 q0, v0 = start(0)
 run = lambda: nc.simulate(model, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-3, atol=1e-3)
@@ -84,6 +97,11 @@ print(json.dumps(out))
 """
 
 
+TITLES = {"fall": "panda (the fall's URDF)", "stock": "panda (the URDF as shipped)",
+          "talos": "talos (talos_reduced.urdf as shipped, free-flyer base)",
+          "balls": "balls (4 bodies on spherical joints)"}
+
+
 def child(tree: Path, calls: int, urdf: str) -> dict:
     env = {**os.environ, "PYTHONPATH": str(tree)}
     out = subprocess.run([sys.executable, "-c", CHILD, str(calls), urdf], env=env, cwd=tree, capture_output=True, text=True,
@@ -103,8 +121,12 @@ def main(argv=None) -> None:
     ap.add_argument("--urdf", choices=("fall", "stock"), default="fall",
                     help="the Panda of joint_simulation.py's fall (its <mimic> and <dynamics> tags dropped, as for "
                          "MuJoCo; the default), or as shipped (its second finger mimics the first)")
+    ap.add_argument("--model", choices=("panda", "talos", "balls"), default="panda",
+                    help="the Panda (--urdf), Talos reduced as shipped on a free-flyer base (example-robot-data), or "
+                         "a chain of 4 bodies on spherical joints")
     ap.add_argument("--smoke", action="store_true", help="2 rounds of 20 calls (CI)")
     a = ap.parse_args(argv)
+    which = a.urdf if a.model == "panda" else a.model
     if a.smoke:
         a.rounds, a.calls = 2, 20
     print(machine())
@@ -113,8 +135,8 @@ def main(argv=None) -> None:
     results = {k: [] for k in trees}
     for _ in range(a.rounds):
         for name, tree in trees.items():
-            results[name].append(child(tree, a.calls, a.urdf))
-    print(f"\n=== panda ({'the URDF as shipped' if a.urdf == 'stock' else 'the fall' + chr(39) + 's URDF'}): nc.simulate of one 1 ms output step (DOPRI5, rtol = atol = 1e-3), {a.calls} calls "
+            results[name].append(child(tree, a.calls, which))
+    print(f"\n=== {TITLES[which]}: nc.simulate of one 1 ms output step (DOPRI5, rtol = atol = 1e-3), {a.calls} calls "
           f"per round, {a.rounds} rounds")
     for name, rs in results.items():
         print(f"  {name}: {rs[0]['file']} (kernels {rs[0]['kernels']}, {rs[0]['stats']})")

@@ -1,15 +1,15 @@
 """The members' coordinate maps of a tree for the start check of the tree library
 (``templates/c/runtime/ncgen_tree_start.h``): per body of the tree tables
 (:mod:`ncgen.codegen.tree_tables`, same order) where its member's 12 local coordinates are in
-``q`` (``idx``, −1 where fixed) and the numbers ``[cst; P; L]``: the fixed coordinates, the pose
+``q`` (``idx``, −1 where fixed), how its joint is read off its relative pose (``how``:
+:data:`READ` of its kind) and the numbers ``[cst; P; L]``: the fixed coordinates, the pose
 of the body's joint frame after the motion ``f_b`` (the member frame times the inverse of the
 tables' ``member``) ``[vec R; p] = P [q_m; 1]`` and back ``q_m = L [vec R; p; 1]`` (both affine:
 the member's coordinates are points and directions fixed in it,
 :meth:`~ncgen.assembly.joint_space.JointSpace.member_coordinates`).
 
 :func:`start_tables` raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree` naming why the
-check does not cover a tree (the caller keeps CasADi's check): a joint other than revolute,
-prismatic and fixed, parameters, a member whose coordinates are not 12 fixed
+check does not cover a tree (the caller keeps CasADi's check): parameters, a member whose coordinates are not 12 fixed
 points and directions spanning its frame, constraints beyond the tree's own (drives, distances).
 The ``num`` rows are ``NCGEN_TREE_START_NUM`` (324) doubles.
 """
@@ -19,17 +19,20 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.manifold import numerical_rank
-from ncgen.codegen.tree_kernels import JOINT_KINDS, LOCAL_MODES
+from ncgen.codegen.tree_kernels import JOINT_KINDS
 from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
 from ncgen.model.data import model_data
 
-#: Joint kinds the check takes (the tables' modes written out about z).
-START_KINDS = frozenset(LOCAL_MODES)
+#: How the check reads each joint kind off its relative pose (``NCGEN_START_*`` of
+#: ``ncgen_tree_start.h``): the tables' modes of the kinds written out about z
+#: (:data:`~ncgen.codegen.tree_kernels.LOCAL_MODES`), then each kind moved by its kernel.
+READ = {"revolute": 1, "prismatic": 2, "fixed": 3, "cylindrical": 4, "universal": 5, "planar": 6, "spherical": 7,
+        "free": 8}
 
 
-def start_tables(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(idx, nz_ptr, nz, num)`` (int32 ``(nb, 12)``, ``2 nb + 1``, the nonzeros of ``P``'s and
-    ``L``'s linear parts, float64 ``(nb, 324)``) of ``model``, packed once per
+def start_tables(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(idx, how, nz_ptr, nz, num)`` (int32 ``(nb, 12)``, ``nb``, ``2 nb + 1``, the nonzeros of
+    ``P``'s and ``L``'s linear parts, float64 ``(nb, 324)``) of ``model``, packed once per
     model (kept in ``model.data``); raises :class:`UnsupportedTree` (module docstring)."""
     data = model_data(model)
     key = ("start tables",)
@@ -44,11 +47,10 @@ def start_tables(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     return tables
 
 
-def _pack(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _pack(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     tables = tree_tables(model)
     js, a = model.joint_space, tables.arrays
-    reasons = [f"joint kind {JOINT_KINDS[k].name}" for k in sorted(set(a["kind"].tolist()))
-               if JOINT_KINDS[k].name not in START_KINDS]
+    reasons = []
     if model.np:
         reasons.append("parameters (the tables hold the model's numbers)")
     mimicked = int(np.count_nonzero(a["rate_src"] != np.arange(tables.nv)))     # rates a mimic map gives
@@ -69,11 +71,11 @@ def _pack(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     if len(seen) != model.nq and not reasons:
         reasons.append("coordinates of no member of the tree")
     if reasons:
-        raise UnsupportedTree(model.name, [f"the start check takes revolute, prismatic and fixed joints: "
-                                           f"{'; '.join(reasons)}"])
+        raise UnsupportedTree(model.name, [f"the start check does not take it: {'; '.join(reasons)}"])
     nz = [_nonzeros(x[12 + 156 * m:12 + 156 * m + 144]) for x in num for m in (0, 1)]
     ptr = np.concatenate([[0], np.cumsum([len(z) for z in nz])])
-    return (np.ascontiguousarray(idx, dtype=np.int32), ptr.astype(np.int32),
+    how = np.array([READ[JOINT_KINDS[k].name] for k in a["kind"]], dtype=np.int32)
+    return (np.ascontiguousarray(idx, dtype=np.int32), how, ptr.astype(np.int32),
             np.concatenate(nz).astype(np.int32), np.ascontiguousarray(num, dtype=np.float64))
 
 

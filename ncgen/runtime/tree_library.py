@@ -688,7 +688,7 @@ class TableJointLoop:
 class _Start(ctypes.Structure):
     """``ncgen_tree_start``: the arguments of ``start_state``."""
 
-    _fields_ = [*((f, ctypes.c_void_p) for f in ("T", "idx", "nz_ptr", "nz", "num")), ("n", ctypes.c_int),
+    _fields_ = [*((f, ctypes.c_void_p) for f in ("T", "idx", "how", "nz_ptr", "nz", "num")), ("n", ctypes.c_int),
                 *((f, ctypes.c_void_p) for f in ("q", "v", "qj", "vj", "check", "w"))]
 
 
@@ -707,7 +707,7 @@ class TreeStart:
         self._fn = self.tree.unit("forward").fn["start_state"]
         nq, nv, n = self.tree.tables.nq, self.tree.tables.nv, model.nq
         self._in, self._out = np.empty(2 * n), np.empty(5 + nq + nv)      # [q; v], [check; qj; vj]: addresses taken once
-        self._w = np.empty(24 * self.tree.tables.nb)
+        self._w = np.empty(24 * self.tree.tables.nb + self.tree.work.size)   # (ncgen_tree_start_work_size or more)
         a, x = self._out.ctypes.data, self._in.ctypes.data
         self._struct = _Start(self.tree.ref, *(t.ctypes.data for t in self._tables), n, x, x + 8 * n, a + 40,
                               a + 8 * (5 + nq), a, self._w.ctypes.data)
