@@ -2,9 +2,11 @@
 :class:`ncgen.runtime.tree_library.TreeStart`) against CasADi's (``JointSpace._holds``,
 ``JointSpace.state``) and against the tree map ``(q_j, v_j) -> (q, v)`` evaluated by CasADi
 (``JointSpace.tree_function``, an independent route through the joints' relative poses):
-the same verdict on starts on and off both constraint levels, the same joint state to 1e-12,
-the distances it reports equal to those of the tree map, its tolerances where they are, and
-the trees it does not take named and left to CasADi's check."""
+the same verdict on starts on and off both constraint levels, on every joint kind of the
+tables, the same joint state to 1e-12 (quaternions as CasADi's, not normalised), the distances
+it reports equal to those of the tree map, its tolerances where they are, a floating-base robot's
+run from a start it accepted against Pinocchio, and the trees it does not take named and left to
+CasADi's check."""
 from __future__ import annotations
 
 import importlib.metadata as md
@@ -15,10 +17,13 @@ import numpy as np
 import pytest
 
 import ncgen as nc
+import ncgen.assembly.joint_space as joint_space
+import ncgen.model.buffered_call as buffered_call
 import ncgen.runtime.run_start as run_start
 from ncgen.assembly.joint_tree import quaternion_matrix
 from ncgen.assembly.joint_space import TREE_Q_TOL, TREE_V_TOL, _tree_holding
 from ncgen.codegen.compiler import CANDIDATES
+from ncgen.codegen.tree_kernels import JOINT_KINDS
 from ncgen.codegen.tree_start import start_tables
 from ncgen.codegen.tree_tables import UnsupportedTree
 from ncgen.runtime.tree_library import bound_tree, loaded_tree_start, tree_start
@@ -41,10 +46,32 @@ def kinds_tree() -> nc.Model:
     return s.build()
 
 
+def every_kind_tree() -> nc.Model:
+    """Every joint kind of the tables: a free root, then revolute, cylindrical, universal,
+    spherical, planar, prismatic and fixed joints, their axes tilted off the coordinate axes
+    (the universal joint's two perpendicular), a rotated body."""
+    s = nc.System("start_every_kind", gravity=(0.0, 0.0, -9.81))
+    R = quaternion_matrix(np.array([0.2, -0.4, 0.3, 0.8]) / np.linalg.norm([0.2, -0.4, 0.3, 0.8]))
+    b = [s.add_body(f"b{k}", mass=1.0 + 0.1 * k, inertia=np.diag([0.02, 0.03, 0.04]), position=(0.4 * k + 0.2, 0.05 * k, 0),
+                    rotation=R if k == 3 else np.eye(3)) for k in range(8)]
+    at = [(0.4 * k, 0.05 * k, 0.0) for k in range(8)]
+    a, c = np.array([0.0, 0.6, 0.8]), np.array([1.0, 0.0, 0.0])
+    s.add_joint(nc.Free(s.ground, b[0], at=at[0], rotation=R, name="root"))
+    s.add_joint(nc.Revolute(b[0], b[1], at=at[1], axis=(0, 0.6, 0.8), name="hinge"))
+    s.add_joint(nc.Cylindrical(b[1], b[2], at=at[2], axis=(0.48, 0.6, 0.64), name="cyl"))
+    s.add_joint(nc.Universal(b[2], b[3], at=at[3], axis_a=a, axis_b=np.cross(a, c), name="hooke"))
+    s.add_joint(nc.Spherical(b[3], b[4], at=at[4], name="ball"))
+    s.add_joint(nc.Planar(b[4], b[5], at=at[5], normal=(0.36, 0.48, 0.8), name="plane"))
+    s.add_joint(nc.Prismatic(b[5], b[6], at=at[6], axis=(1, 0, 0), name="slider"))
+    s.add_joint(nc.Fixed(b[6], b[7], at=at[7], name="weld"))
+    return s.build()
+
+
 def robot(name: str, mimic: bool = False) -> nc.Model:
     """The robot of example-robot-data, as shipped with ``mimic`` (the Panda's second finger
     mimics its first), else without its ``<mimic>`` and ``<dynamics>`` tags."""
-    rel = {"panda": "panda_description/urdf/panda.urdf", "ur10": "ur_description/urdf/ur10_robot.urdf"}[name]
+    rel = {"panda": "panda_description/urdf/panda.urdf", "ur10": "ur_description/urdf/ur10_robot.urdf",
+           "talos": "talos_data/robots/talos_reduced.urdf"}[name]
     try:
         path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
     except (md.PackageNotFoundError, StopIteration, TypeError):
@@ -52,7 +79,7 @@ def robot(name: str, mimic: bool = False) -> nc.Model:
     text = open(path).read()
     if not mimic:
         text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
-    return nc.System.from_urdf(text).build()
+    return nc.System.from_urdf(text, floating_base=name == "talos").build()
 
 
 def on_the_tree(model, rng):
@@ -110,8 +137,18 @@ def test_the_start_check_equals_casadis_on_every_kind_it_takes():
     assert_equal_to_casadi(model, 59)
 
 
+def test_the_start_check_equals_casadis_on_every_joint_kind():
+    """Free, revolute, cylindrical, universal, spherical, planar, prismatic and fixed joints
+    (tilted axes): verdicts, joint states (1e-12: the quaternions Shepperd's of CasADi's
+    joint state) and the distances to the tree (CasADi's tree map) as CasADi's."""
+    model = every_kind_tree()
+    kinds = {int(k) for k in bound_tree(model).tables.arrays["kind"]}
+    assert kinds == set(range(len(JOINT_KINDS)))
+    assert_equal_to_casadi(model, 61)
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["panda", "ur10"])
+@pytest.mark.parametrize("name", ["panda", "ur10", "talos"])
 def test_the_start_check_equals_casadis_on_robots(name):
     assert_equal_to_casadi(robot(name), 7)
 
@@ -158,11 +195,12 @@ def _moved_to(model, ts, q, v, which: int, ratio: float):
 
 
 @pytest.mark.parametrize("which", [0, 1])
-def test_a_start_just_beyond_the_tolerance_goes_to_casadis_check_and_one_within_is_accepted(which, monkeypatch):
+@pytest.mark.parametrize("tree", [kinds_tree, every_kind_tree])
+def test_a_start_just_beyond_the_tolerance_goes_to_casadis_check_and_one_within_is_accepted(tree, which, monkeypatch):
     """Moved to 0.5 of the tolerance: the C accepts (no CasADi call); to 2×: the C does not,
     CasADi's check decides (accepts: still within its own tolerance, the joint state its own);
     far beyond (1e4×): refused by both, and simulate projects it as it did before."""
-    model = kinds_tree()
+    model = tree()
     ts = tree_start(model)
     q, v = on_the_tree(model, np.random.default_rng(1))
     js = model.joint_space
@@ -205,16 +243,64 @@ def test_simulate_takes_the_c_check_after_the_first_run_and_runs_as_from_casadis
 
 
 def test_trees_the_check_does_not_take_are_named_and_keep_casadis_check():
-    """Spherical and free joints: refused by name; no TreeStart, and the start check is
-    CasADi's."""
+    """A tree with parameters (the tables hold the model's numbers): refused by name; no
+    TreeStart, and the start check is CasADi's."""
     s = nc.System("start_uncovered", gravity=(0.0, 0.0, -9.81))
+    s.add_parameter("unused", 1.0)
     b = [s.add_body(f"b{k}", mass=1.0, inertia=np.diag([0.02, 0.03, 0.04]), position=(0.4 * k + 0.2, 0, 0))
          for k in range(3)]
     s.add_joint(nc.Free(s.ground, b[0], at=(0.2, 0, 0), rotation=np.eye(3), name="root"))
     s.add_joint(nc.Spherical(b[0], b[1], at=(0.4, 0, 0), name="ball"))
     s.add_joint(nc.Revolute(b[0], b[2], at=(0.6, 0, 0), axis=(0, 0, 1), name="f1"))
     model = s.build()
-    with pytest.raises(UnsupportedTree, match="start check.*joint kind spherical; joint kind free"):
+    with pytest.raises(UnsupportedTree, match="start check does not take it: parameters"):
         start_tables(model)
     nc.simulate(model, 0.01, 0.01, method="joint", kernels="tables")
     assert loaded_tree_start(model) is None
+
+
+@pytest.mark.slow
+def test_a_floating_base_robot_runs_from_a_start_the_c_check_took_as_pinocchio(monkeypatch):
+    """Solo12 (example-robot-data, free-flyer base): a new start after the first run is taken
+    by the C check (CasADi's start check not called) and the joint run from it (0.05 s, no
+    input) ends where Pinocchio's ABA integrated by RK4 on its configuration space
+    (``pinocchio.integrate``, 1e-4 s steps) ends, to 1e-8 (the base's quaternion up to its sign)."""
+    pin = pytest.importorskip("pinocchio")
+    from pinocchio_robots import JointMap, pinocchio_models, random_configuration
+    from test_tree_algorithms_pinocchio import model_of
+
+    model = model_of("solo12")
+    pm = pinocchio_models("solo12")[1]
+    jm, d, js = JointMap(model, pm), pm.createData(), model.joint_space
+    rng = np.random.default_rng(4)
+    run = (lambda q, v: nc.simulate(model, 0.05, 0.05, q0=q, v0=v, method="joint", kernels="tables", rtol=1e-12,
+                                    atol=1e-12))
+    qp = random_configuration(pm, rng, bound=0.8)
+    run(*model.from_joint_space(jm.q_to_ncgen(qp), np.zeros(js.nv)))     # loads the forward unit
+    qp, vp = random_configuration(pm, rng, bound=0.8), rng.normal(size=pm.nv)
+    q, v = model.from_joint_space(jm.q_to_ncgen(qp), jm.P.T @ vp)
+    assert _tree_holding(tree_start(model)(q, v)[0])
+    casadi_checks = []
+    real = buffered_call.buffered
+    monkeypatch.setattr(joint_space, "buffered", lambda m, name, make: (casadi_checks.append(name), real(m, name, make))[1])
+    tr = run(q, v)
+    assert "start_check" not in casadi_checks and "state_check" not in casadi_checks
+    js._checked_state(model, q + 0.0, v + 1.0, model.t0, model.p0)      # (without the C: CasADi's, counted)
+    assert casadi_checks == ["start_check"]
+    monkeypatch.undo()
+    h, x, w = 1e-4, qp.copy(), vp.copy()
+    accel = (lambda x_, w_: pin.aba(pm, d, x_, w_, np.zeros(pm.nv)))
+    for _ in range(500):
+        k1v, k1a = w, accel(x, w)
+        k2v = w + 0.5 * h * k1a
+        k2a = accel(pin.integrate(pm, x, 0.5 * h * k1v), k2v)
+        k3v = w + 0.5 * h * k2a
+        k3a = accel(pin.integrate(pm, x, 0.5 * h * k2v), k3v)
+        k4v = w + h * k3a
+        k4a = accel(pin.integrate(pm, x, h * k3v), k4v)
+        x = pin.integrate(pm, x, h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v))
+        w = w + h / 6 * (k1a + 2 * k2a + 2 * k3a + k4a)
+    canonical = (lambda y: np.concatenate([y[:3], y[3:7] * (1.0 if y[6] >= 0 else -1.0), y[7:]]))   # qw ≥ 0
+    assert pm.joints[1].shortname() == "JointModelFreeFlyer" and pm.joints[1].idx_q == 0
+    np.testing.assert_allclose(canonical(jm.q_to_pin(tr.qj[-1], pm.nq)), canonical(x), rtol=0, atol=1e-8)
+    np.testing.assert_allclose(jm.P @ tr.vj[-1], w, rtol=0, atol=1e-8)

@@ -7,7 +7,9 @@
  *
  * Checked against the forward map written again here (poses by matrix products) and its rates by central
  * differences: the joint state recovered (also near θ = π), the distances at round-off on the tree, equal to a
- * move off it along a slot, a NaN seen by the sum, a joint kind the check does not take refused.  Built and
+ * move off it along a slot, a NaN seen by the sum, a joint kind the check does not take refused; with the slider
+ * made a mimic of the hinge (s = k θ + c, ṡ = k θ̇), a start with the follower where the map puts it accepted and
+ * one with it elsewhere (or moving otherwise) refused, by the distance it is off.  Built and
  * run by tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
 #if defined(__GNUC__)
@@ -38,16 +40,19 @@ static void members_at(double th, double s, double *q) {
 int main(void) {
   ncgen_tree_joint_kind joint[3] = {{0, 0, 0, 0, 0, 0, 0, 3}, {0, 0, 0, 0, 1, 1, 0, 1}, {0, 0, 0, 0, 1, 1, 0, 2}};
   ncgen_tree_kinds K = {joint, 3, 0, 0, 0};
-  int parent[3] = {-1, 0, 1}, kind[3] = {1, 2, 0}, q_at[3] = {0, 1, 0}, v_at[3] = {0, 1, 0};
+  int parent[3] = {-1, 0, 1}, kind[3] = {1, 2, 0}, q_at[3] = {0, 1, 0}, v_at[3] = {0, 1, 0}, how[3] = {1, 2, 3};
   int idx[36], nz_ptr[7], nz[72], i, b, k;
-  double num[3 * NCGEN_TREE_START_NUM] = {0}, q[33], v[33], qm[36], qp[36], qn[36], qj[2], vj[2], check[5], w[144];
+  int q_src[2] = {-1, 0}, rate_src[2] = {0, 0};                   /* the mimic case: s = k θ + c, ṡ = k θ̇ */
+  const double K_MIMIC = -0.4, C_MIMIC = 0.05, q_coef[2] = {1.0, K_MIMIC}, q_off[2] = {0.0, C_MIMIC};
+  const double rate_coef[2] = {1.0, K_MIMIC};
+  double num[3 * NCGEN_TREE_START_NUM] = {0}, q[33], v[33], qm[36], qp[36], qn[36], qj[2], vj[2], check[5], w[256];
   const double ths[2] = {0.7, 3.1}, s = -0.35, th_dot = 1.3, s_dot = -0.8, h = 1e-6;
   ncgen_tree T;
   ncgen_tree_start S;
   memset(&T, 0, sizeof T);
   T.nb = 3, T.nq = 2, T.nv = 2, T.ni = 2, T.parent = parent, T.kind = kind, T.q_at = q_at, T.v_at = v_at;
   T.xin = XIN;
-  S.T = &T, S.idx = idx, S.nz_ptr = nz_ptr, S.nz = nz, S.num = num, S.n = 33, S.q = q, S.v = v;
+  S.T = &T, S.idx = idx, S.how = how, S.nz_ptr = nz_ptr, S.nz = nz, S.num = num, S.n = 33, S.q = q, S.v = v;
   S.qj = qj, S.vj = vj, S.check = check, S.w = w;
   for (b = 0; b < 3; ++b) {
     double *cst = num + NCGEN_TREE_START_NUM * b, *P = cst + 12, *L = P + 156;
@@ -85,7 +90,42 @@ int main(void) {
   v[7] = NAN;
   ncgen_tree_start_state(&K, &S);
   CHECK(!isfinite(check[4]), "a NaN in v: the sum %g", check[4]);
+  {                                                      /* the slider a mimic of the hinge */
+    const double th = 0.9, th_dot = 0.7, off[2] = {0.0, 2e-6};
+    T.q_src = q_src, T.q_coef = q_coef, T.q_off = q_off, T.rate_src = rate_src, T.rate_coef = rate_coef;
+    for (k = 0; k < 2; ++k) {                            /* the follower where the map puts it, then 2e-6 off */
+      double s_k = K_MIMIC * th + C_MIMIC + off[k];
+      members_at(th, s_k, qm);
+      members_at(th + h * th_dot, s_k + h * K_MIMIC * th_dot, qp);
+      members_at(th - h * th_dot, s_k - h * K_MIMIC * th_dot, qn);
+      for (i = 0, b = 0; i < 36; ++i) {
+        if (i >= 9 && i < 12) {
+          num[i] = qm[i];
+          continue;
+        }
+        q[b] = qm[i], v[b] = (qp[i] - qn[i]) / (2 * h), ++b;
+      }
+      CHECK(ncgen_tree_start_state(&K, &S) == 0, "status (mimic)");
+      CHECK(fabs(qj[1] - s_k) < 1e-14, "the follower read off: %g, expected %g", qj[1], s_k);
+      if (k == 0)
+        CHECK(check[0] < 1e-14 && check[1] < 1e-8, "on the mimic map: distances %g %g", check[0], check[1]);
+      else
+        CHECK(fabs(check[0] - 2e-6) < 1e-12, "the follower 2e-6 off its map: distance %g", check[0]);
+    }
+    members_at(th, K_MIMIC * th + C_MIMIC, qm);          /* the follower at its place, moving at the wrong rate */
+    members_at(th + h * th_dot, K_MIMIC * th + C_MIMIC + h * (K_MIMIC * th_dot + 1e-3), qp);
+    members_at(th - h * th_dot, K_MIMIC * th + C_MIMIC - h * (K_MIMIC * th_dot + 1e-3), qn);
+    for (i = 0, b = 0; i < 36; ++i)
+      if (i < 9 || i >= 12) q[b] = qm[i], v[b] = (qp[i] - qn[i]) / (2 * h), ++b;
+    ncgen_tree_start_state(&K, &S);
+    CHECK(check[0] < 1e-14 && fabs(check[1] - 1e-3) < 1e-8, "the follower's rate 1e-3 off: distances %g %g",
+          check[0], check[1]);
+    T.q_src = 0, T.rate_src = 0;
+  }
+  CHECK(ncgen_tree_start_work_size(&K, &T) <= 256, "work %ld", ncgen_tree_start_work_size(&K, &T));
   joint[2].mode = 0;                                     /* a kind taken by its kernel: not this check's */
   CHECK(ncgen_tree_start_state(&K, &S) == 1, "kind refused");
+  joint[2].mode = 3, how[2] = 7;                          /* read off as a kind of other sizes: refused */
+  CHECK(ncgen_tree_start_state(&K, &S) == 1, "a reading of other sizes refused");
   return report("test_tree_start");
 }
