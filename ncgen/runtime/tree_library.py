@@ -692,15 +692,29 @@ class _Start(ctypes.Structure):
                 *((f, ctypes.c_void_p) for f in ("q", "v", "qj", "vj", "check", "w"))]
 
 
+#: Largest share of the start check's position tolerance (``TREE_Q_TOL``) its distance may take at
+#: the model's own initial state (consistent to round-off) for the check to be used: where reading
+#: the joints off the natural coordinates amplifies their round-off beyond it (members whose
+#: coordinates are points close together: Talos of example-robot-data, 0.69 of it at its initial
+#: state and 1.5–10× at others; the Panda 0.035, Solo12 0.0002), starts made by
+#: ``from_joint_space`` would go on to CasADi's check after the C's, so the C is not called.
+START_ROUNDOFF_SHARE = 0.25
+
+
 class TreeStart:
     """``start(q, v) -> (check, qj, vj)``: the tree library's start check of one model
     (``ncgen_tree_start.h``: ``check = [max |q − q(q_j)|, max |v − v(q_j, v_j)|, |q|∞, |v|∞, s]``,
     ``s`` finite only if every value is) on its tables and members' coordinate maps
     (:func:`~ncgen.codegen.tree_start.start_tables`); the forward unit's, so a model whose
-    joint run is on the tables has it loaded.  Calls from threads take turns (one work array)."""
+    joint run is on the tables has it loaded.  Calls from threads take turns (one work array).
+    Raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree` for a model the check does not
+    take, and for one whose initial state it finds more than :data:`START_ROUNDOFF_SHARE` of its
+    tolerance off the tree (round-off of its coordinates, read off joint by joint)."""
 
     def __init__(self, model):
+        from ncgen.assembly.joint_space import TREE_Q_TOL
         from ncgen.codegen.tree_start import start_tables
+        from ncgen.codegen.tree_tables import UnsupportedTree
 
         self._tables = start_tables(model)
         self.tree = bound_tree(model)
@@ -714,6 +728,13 @@ class TreeStart:
         self._ref = ctypes.addressof(self._struct)
         self._n, self._cut = n, 5 + nq
         self._lock = threading.Lock()
+        check = self(model.q0, model.v0)[0]
+        share = check[0] / (TREE_Q_TOL * max(1.0, check[2]))
+        if not share <= START_ROUNDOFF_SHARE:
+            raise UnsupportedTree(model.name, [
+                f"the start check finds its initial state {share:.3g} of its tolerance off the tree (more than "
+                f"{START_ROUNDOFF_SHARE}: round-off of its natural coordinates read off joint by joint; CasADi's "
+                "check decides its starts)"])
 
     def __call__(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(check, qj, vj)`` (new arrays) at ``q``, ``v`` (``nq`` floats each)."""

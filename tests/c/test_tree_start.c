@@ -91,13 +91,13 @@ int main(void) {
   ncgen_tree_start_state(&K, &S);
   CHECK(!isfinite(check[4]), "a NaN in v: the sum %g", check[4]);
   {                                                      /* the slider a mimic of the hinge */
-    const double th = 0.9, th_dot = 0.7, off[2] = {0.0, 2e-6};
+    const double th = 0.9, th_rate = 0.7, off[2] = {0.0, 2e-6};
     T.q_src = q_src, T.q_coef = q_coef, T.q_off = q_off, T.rate_src = rate_src, T.rate_coef = rate_coef;
     for (k = 0; k < 2; ++k) {                            /* the follower where the map puts it, then 2e-6 off */
       double s_k = K_MIMIC * th + C_MIMIC + off[k];
       members_at(th, s_k, qm);
-      members_at(th + h * th_dot, s_k + h * K_MIMIC * th_dot, qp);
-      members_at(th - h * th_dot, s_k - h * K_MIMIC * th_dot, qn);
+      members_at(th + h * th_rate, s_k + h * K_MIMIC * th_rate, qp);
+      members_at(th - h * th_rate, s_k - h * K_MIMIC * th_rate, qn);
       for (i = 0, b = 0; i < 36; ++i) {
         if (i >= 9 && i < 12) {
           num[i] = qm[i];
@@ -113,8 +113,8 @@ int main(void) {
         CHECK(fabs(check[0] - 2e-6) < 1e-12, "the follower 2e-6 off its map: distance %g", check[0]);
     }
     members_at(th, K_MIMIC * th + C_MIMIC, qm);          /* the follower at its place, moving at the wrong rate */
-    members_at(th + h * th_dot, K_MIMIC * th + C_MIMIC + h * (K_MIMIC * th_dot + 1e-3), qp);
-    members_at(th - h * th_dot, K_MIMIC * th + C_MIMIC - h * (K_MIMIC * th_dot + 1e-3), qn);
+    members_at(th + h * th_rate, K_MIMIC * th + C_MIMIC + h * (K_MIMIC * th_rate + 1e-3), qp);
+    members_at(th - h * th_rate, K_MIMIC * th + C_MIMIC - h * (K_MIMIC * th_rate + 1e-3), qn);
     for (i = 0, b = 0; i < 36; ++i)
       if (i < 9 || i >= 12) q[b] = qm[i], v[b] = (qp[i] - qn[i]) / (2 * h), ++b;
     ncgen_tree_start_state(&K, &S);
