@@ -7,12 +7,13 @@ processes started in alternation, ``--rounds`` each (interleaved: the load falls
 each child timing ``--calls`` calls after a warm-up; min and median of the rounds and of their
 ratios (this tree / before) are printed.  The same calls from a new start each (``q0`` moved by
 1e-3 rad per joint and call) time the start check that a repeated start skips.  ``--urdf stock``:
-the Panda as shipped (its second finger mimics the first) in place of the fall's.  ``--model talos``:
-Talos reduced of example-robot-data as shipped, on a free-flyer base (a floating-base tree: free,
-revolute and fixed joints); ``--model balls``: a chain of 4 bodies on spherical joints.
+the Panda as shipped (its second finger mimics the first) in place of the fall's.  ``--model talos``,
+``--model solo12``: Talos reduced or Solo12 of example-robot-data as shipped, on a free-flyer base
+(floating-base trees: free, revolute and fixed joints); ``--model balls``: a chain of 4 bodies on
+spherical joints.
 
     python benchmarks/simulate_fixed_cost.py [--before DIR] [--rounds 7] [--calls 200] [--urdf fall|stock]
-                                             [--model panda|talos|balls]
+                                             [--model panda|talos|solo12|balls]
 """
 from __future__ import annotations
 
@@ -38,7 +39,8 @@ import numpy as np
 import ncgen as nc
 
 which = sys.argv[2]
-rel = {"talos": "talos_data/robots/talos_reduced.urdf"}.get(which, "panda_description/urdf/panda.urdf")
+rel = {"talos": "talos_data/robots/talos_reduced.urdf", "solo12": "solo_description/robots/solo12.urdf"}.get(
+    which, "panda_description/urdf/panda.urdf")
 stock = which == "stock"
 if which == "balls":                    # a chain of 4 bodies on spherical joints, hanging from the ground
     s = nc.System("balls", gravity=(0.0, 0.0, -9.81))
@@ -53,7 +55,7 @@ else:
     text = open(path).read()
     if which == "fall":                 # the fall's model (benchmarks/joint_simulation.py)
         text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
-    model = nc.System.from_urdf(text, floating_base=which == "talos").build()
+    model = nc.System.from_urdf(text, floating_base=which in ("talos", "solo12")).build()
 js = model.joint_space
 sl = js.slices()
 
@@ -99,6 +101,7 @@ print(json.dumps(out))
 
 TITLES = {"fall": "panda (the fall's URDF)", "stock": "panda (the URDF as shipped)",
           "talos": "talos (talos_reduced.urdf as shipped, free-flyer base)",
+          "solo12": "solo12 (solo12.urdf as shipped, free-flyer base)",
           "balls": "balls (4 bodies on spherical joints)"}
 
 
@@ -121,9 +124,9 @@ def main(argv=None) -> None:
     ap.add_argument("--urdf", choices=("fall", "stock"), default="fall",
                     help="the Panda of joint_simulation.py's fall (its <mimic> and <dynamics> tags dropped, as for "
                          "MuJoCo; the default), or as shipped (its second finger mimics the first)")
-    ap.add_argument("--model", choices=("panda", "talos", "balls"), default="panda",
-                    help="the Panda (--urdf), Talos reduced as shipped on a free-flyer base (example-robot-data), or "
-                         "a chain of 4 bodies on spherical joints")
+    ap.add_argument("--model", choices=("panda", "talos", "solo12", "balls"), default="panda",
+                    help="the Panda (--urdf), Talos reduced or Solo12 as shipped on a free-flyer base "
+                         "(example-robot-data), or a chain of 4 bodies on spherical joints")
     ap.add_argument("--smoke", action="store_true", help="2 rounds of 20 calls (CI)")
     a = ap.parse_args(argv)
     which = a.urdf if a.model == "panda" else a.model
