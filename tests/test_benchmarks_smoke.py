@@ -77,6 +77,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                                      re.compile(r"this tree: +[\d,]+ instructions per call, start check")]),
     ("door_callgrind.py", ["=== ur10: one call of each door at one state",
                            re.compile(r"joint_forward_dynamics: this tree [\d,]+ instructions per call")]),
+    ("simulate_fixed_cost.py --model balls", ["=== balls (4 bodies on spherical joints): nc.simulate of one 1 ms "
+                                              "output step", "this tree: FIXED COST, a new start each call, CPU"]),
     ("simulate_fixed_cost.py", ["=== panda (the fall's URDF): nc.simulate of one 1 ms output step",
                                 "this tree: FIXED COST (simulate - loop), CPU",
                                 "this tree: FIXED COST, a new start each call, CPU", "load average at the end"]),
