@@ -320,3 +320,20 @@ def test_a_floating_base_robot_runs_from_a_start_the_c_check_took_as_pinocchio(m
     assert pm.joints[1].shortname() == "JointModelFreeFlyer" and pm.joints[1].idx_q == 0
     np.testing.assert_allclose(canonical(jm.q_to_pin(tr.qj[-1], pm.nq)), canonical(x), rtol=0, atol=1e-8)
     np.testing.assert_allclose(jm.P @ tr.vj[-1], w, rtol=0, atol=1e-8)
+
+
+def test_the_readings_of_the_c_header_are_the_kinds():
+    """``READ`` (ncgen/codegen/tree_start.py) names the header's ``NCGEN_START_*`` codes, and the
+    header's positions and rates per code are the joint kinds' (:data:`JOINT_KINDS`)."""
+    from ncgen.codegen.render import shipped_templates_dir
+    from ncgen.codegen.tree_kernels import LOCAL_MODES
+    from ncgen.codegen.tree_start import READ
+
+    text = (shipped_templates_dir() / "runtime" / "ncgen_tree_start.h").read_text()
+    codes = {m.group(1).lower(): int(m.group(2)) for m in re.finditer(r"#define NCGEN_START_([A-Z]+) (\d+)", text)}
+    assert codes == READ and set(READ) == {k.name for k in JOINT_KINDS}
+    assert all(READ[k] == mode for k, mode in LOCAL_MODES.items())      # the tables' modes written out about z
+    sizes = {w: [int(x) for x in re.search(rf"NCGEN_START_{w}\[9\] = \{{([^}}]*)\}}", text).group(1).split(",")]
+             for w in ("NQ", "NV")}
+    for k in JOINT_KINDS:
+        assert (sizes["NQ"][READ[k.name]], sizes["NV"][READ[k.name]]) == (k.nq, k.nv), k.name
