@@ -6,7 +6,8 @@ e.g. ``git archive`` of an older commit) the same run of both trees is timed in 
 processes started in alternation, ``--rounds`` each (interleaved: the load falls on both),
 each child timing ``--calls`` calls after a warm-up; min and median of the rounds and of their
 ratios (this tree / before) are printed.  The same calls from a new start each (``q0`` moved by
-1e-3 rad per joint and call) time the start check that a repeated start skips.  ``--urdf stock``:
+1e-3 rad per joint and call) time the start check that a repeated start skips, and the start check
+alone (``JointSpace._checked_state`` at new starts) is timed too.  ``--urdf stock``:
 the Panda as shipped (its second finger mimics the first) in place of the fall's.  ``--model talos``,
 ``--model solo12``: Talos reduced or Solo12 of example-robot-data as shipped, on a free-flyer base
 (floating-base trees: free, revolute and fixed joints); ``--model balls``: a chain of 4 bodies on
@@ -80,6 +81,17 @@ c = time.process_time()
 for q, v in starts:                     # a new start each call: its start check is not kept from an earlier run
     nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3)
 out["cpu_new_start"] = (time.process_time() - c) / calls
+try:                                    # the start check alone at new starts (its C where the tree library has it)
+    from ncgen.runtime.tree_library import loaded_tree_start
+    ts = loaded_tree_start(model)
+    fresh = [start(calls + k) for k in range(calls)]
+    c = time.process_time()
+    for q, v in fresh:
+        js._checked_state(model, q, v, model.t0, model.p0, ts)
+    out["check_cpu"] = (time.process_time() - c) / calls
+    out["check_c"] = ts is not None
+except Exception as e:                  # noqa: BLE001 - an older tree: no separate start check
+    out["check_error"] = repr(e)
 try:                                    # the C loop alone on the same grid (this tree's interface)
     from ncgen.codegen.joint_loop import run_options
     from ncgen.runtime.joint_integrator import JointIntegrator
@@ -146,13 +158,19 @@ def main(argv=None) -> None:
         print(line(f"{name}: simulate, CPU per call", [r["cpu"] for r in rs]))
         print(line(f"{name}: simulate, wall per call", [r["wall"] for r in rs]))
         print(line(f"{name}: simulate from a new start, CPU per call", [r["cpu_new_start"] for r in rs]))
+        if "check_cpu" in rs[0]:
+            print(line(f"{name}: start check alone ({'C' if rs[0]['check_c'] else 'CasADi'}), a new start, CPU",
+                       [r["check_cpu"] for r in rs]))
         if "loop_cpu" in rs[0]:
             print(line(f"{name}: the C loop alone, CPU per call", [r["loop_cpu"] for r in rs]))
             print(line(f"{name}: FIXED COST (simulate - loop), CPU", [r["cpu"] - r["loop_cpu"] for r in rs]))
             print(line(f"{name}: FIXED COST, a new start each call, CPU", [r["cpu_new_start"] - r["loop_cpu"]
                                                                           for r in rs]))
     if a.before:
-        for clock, label in (("cpu", "CPU"), ("wall", "WALL"), ("cpu_new_start", "CPU, a new start each call")):
+        for clock, label in (("cpu", "CPU"), ("wall", "WALL"), ("cpu_new_start", "CPU, a new start each call"),
+                             ("check_cpu", "CPU of the start check alone, a new start")):
+            if clock not in results["before"][0] or clock not in results["this tree"][0]:
+                continue
             ratios = [x[clock] / y[clock] for x, y in zip(results["this tree"], results["before"])]
             print(f"  RATIO this tree / before, simulate {label}: min {min(ratios):.3f}, "
                   f"median {statistics.median(ratios):.3f}")
