@@ -84,11 +84,18 @@ out["cpu_new_start"] = (time.process_time() - c) / calls
 try:                                    # the start check alone at new starts (its C where the tree library has it)
     from ncgen.runtime.tree_library import loaded_tree_start
     ts = loaded_tree_start(model)
-    fresh = [start(calls + k) for k in range(calls)]
+    fresh = []
+    for k in range(calls, 3 * calls):   # (a start from_joint_space cannot make is skipped: Talos' round-off, a few)
+        try:
+            fresh.append(start(k))
+        except nc.ModelError:
+            continue
+        if len(fresh) == calls:
+            break
     c = time.process_time()
     for q, v in fresh:
         js._checked_state(model, q, v, model.t0, model.p0, ts)
-    out["check_cpu"] = (time.process_time() - c) / calls
+    out["check_cpu"] = (time.process_time() - c) / len(fresh)
     out["check_c"] = ts is not None
 except Exception as e:                  # noqa: BLE001 - an older tree: no separate start check
     out["check_error"] = repr(e)
