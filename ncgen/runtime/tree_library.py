@@ -721,7 +721,7 @@ class TreeStart:
         self._fn = self.tree.unit("forward").fn["start_state"]
         nq, nv, n = self.tree.tables.nq, self.tree.tables.nv, model.nq
         self._in, self._out = np.empty(2 * n), np.empty(5 + nq + nv)      # [q; v], [check; qj; vj]: addresses taken once
-        self._w = np.empty(24 * self.tree.tables.nb + self.tree.work.size)   # (ncgen_tree_start_work_size or more)
+        self._w = np.empty(24 * self.tree.tables.nb + self.tree.work.size)   # (NCGEN_TREE_START_WORK_SIZE or more)
         a, x = self._out.ctypes.data, self._in.ctypes.data
         self._struct = _Start(self.tree.ref, *(t.ctypes.data for t in self._tables), n, x, x + 8 * n, a + 40,
                               a + 8 * (5 + nq), a, self._w.ctypes.data)

@@ -122,7 +122,7 @@ int main(void) {
           check[0], check[1]);
     T.q_src = 0, T.rate_src = 0;
   }
-  CHECK(ncgen_tree_start_work_size(&K, &T) <= 256, "work %ld", ncgen_tree_start_work_size(&K, &T));
+  CHECK(NCGEN_TREE_START_WORK_SIZE(&K, &T) <= 256, "work %ld", NCGEN_TREE_START_WORK_SIZE(&K, &T));
   joint[2].mode = 0;                                     /* a kind taken by its kernel: not this check's */
   CHECK(ncgen_tree_start_state(&K, &S) == 1, "kind refused");
   joint[2].mode = 3, how[2] = 7;                          /* read off as a kind of other sizes: refused */

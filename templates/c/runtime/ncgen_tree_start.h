@@ -35,7 +35,7 @@
  * and their rates the least-squares solution of S w = ξ (S at the positions read off); the joint frame forward
  * is then F = A T_J(q_j) from the kernel (which normalises a quaternion) with rate dA T_J + F (S w)^, so that
  * a rate ξ outside S's range, or a rotation that is not one, shows in the distances.
- * Work w: ncgen_tree_start_work_size(K, T) doubles.  Returns 0, or 1 when a body's joint is of a kind this
+ * Work w: NCGEN_TREE_START_WORK_SIZE(K, T) doubles.  Returns 0, or 1 when a body's joint is of a kind this
  * check does not take (how[b] not matching its kind's sizes and mode, or its kernel not set). */
 #ifndef NCGEN_TREE_START_H
 #define NCGEN_TREE_START_H
@@ -305,10 +305,10 @@ static int ncgen_start_local(const ncgen_tree_joint_kind *k, int how, const doub
 /* The positions and rates each way of reading a joint off takes (how, module comment; 0 unused). */
 static const int NCGEN_START_NQ[9] = {0, 1, 1, 0, 2, 2, 3, 4, 7}, NCGEN_START_NV[9] = {0, 1, 1, 0, 2, 2, 3, 3, 6};
 
-/* Doubles of work ncgen_tree_start_state needs for the tables T. */
-static long ncgen_tree_start_work_size(const ncgen_tree_kinds *K, const ncgen_tree *T) {
-  return 24L * T->nb + ncgen_tree_max_in(K) + ncgen_tree_max_out(K) + (K->max_w > 0 ? K->max_w : 1);
-}
+/* Doubles of work ncgen_tree_start_state needs for the tables T (a macro: units that do not call it warn of no
+ * unused function): the frames forward (24 nb), a kernel's input, output and work. */
+#define NCGEN_TREE_START_WORK_SIZE(K, T) \
+  (24L * (T)->nb + ncgen_tree_max_in(K) + ncgen_tree_max_out(K) + ((K)->max_w > 0 ? (K)->max_w : 1))
 
 static int ncgen_tree_start_state(const ncgen_tree_kinds *K, const ncgen_tree_start *S) {
   const ncgen_tree *T = S->T;
