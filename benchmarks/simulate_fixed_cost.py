@@ -7,9 +7,11 @@ processes started in alternation, ``--rounds`` each (interleaved: the load falls
 each child timing ``--calls`` calls after a warm-up; min and median of the rounds and of their
 ratios (this tree / before) are printed.  The same calls from a new start each (``q0`` moved by
 1e-3 rad per joint and call) time the start check that a repeated start skips.  ``--urdf stock``:
-the Panda as shipped (its second finger mimics the first) in place of the fall's.
+the Panda as shipped (its second finger mimics the first) in place of the fall's; ``--kernels
+flat`` (or ``tables``): the run's kernels (``nc.simulate(..., kernels=...)``), default ``auto``.
 
     python benchmarks/simulate_fixed_cost.py [--before DIR] [--rounds 7] [--calls 200] [--urdf fall|stock]
+        [--kernels auto|tables|flat]
 """
 from __future__ import annotations
 
@@ -51,7 +53,8 @@ def start(k):
     return model.from_joint_space(qj, np.zeros(js.nv))
 
 q0, v0 = start(0)
-run = lambda: nc.simulate(model, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-3, atol=1e-3)
+kernels = sys.argv[3]
+run = lambda: nc.simulate(model, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-3, atol=1e-3, kernels=kernels)
 for _ in range(20):
     tr = run()
 calls = int(sys.argv[1])
@@ -63,7 +66,7 @@ out = {"cpu": (time.process_time() - c) / calls, "wall": (time.perf_counter() - 
 starts = [start(k) for k in range(calls)]
 c = time.process_time()
 for q, v in starts:                     # a new start each call: its start check is not kept from an earlier run
-    nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3)
+    nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3, kernels=kernels)
 out["cpu_new_start"] = (time.process_time() - c) / calls
 try:                                    # the C loop alone on the same grid (this tree's interface)
     from ncgen.codegen.joint_loop import run_options
@@ -84,9 +87,9 @@ print(json.dumps(out))
 """
 
 
-def child(tree: Path, calls: int, urdf: str) -> dict:
+def child(tree: Path, calls: int, urdf: str, kernels: str) -> dict:
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    out = subprocess.run([sys.executable, "-c", CHILD, str(calls), urdf], env=env, cwd=tree, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", CHILD, str(calls), urdf, kernels], env=env, cwd=tree, capture_output=True, text=True,
                          check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
@@ -103,6 +106,8 @@ def main(argv=None) -> None:
     ap.add_argument("--urdf", choices=("fall", "stock"), default="fall",
                     help="the Panda of joint_simulation.py's fall (its <mimic> and <dynamics> tags dropped, as for "
                          "MuJoCo; the default), or as shipped (its second finger mimics the first)")
+    ap.add_argument("--kernels", choices=("auto", "tables", "flat"), default="auto",
+                    help="the run's kernels (nc.simulate's kernels=): the tree tables' loop or the model's own")
     ap.add_argument("--smoke", action="store_true", help="2 rounds of 20 calls (CI)")
     a = ap.parse_args(argv)
     if a.smoke:
@@ -113,7 +118,7 @@ def main(argv=None) -> None:
     results = {k: [] for k in trees}
     for _ in range(a.rounds):
         for name, tree in trees.items():
-            results[name].append(child(tree, a.calls, a.urdf))
+            results[name].append(child(tree, a.calls, a.urdf, a.kernels))
     print(f"\n=== panda ({'the URDF as shipped' if a.urdf == 'stock' else 'the fall' + chr(39) + 's URDF'}): nc.simulate of one 1 ms output step (DOPRI5, rtol = atol = 1e-3), {a.calls} calls "
           f"per round, {a.rounds} rounds")
     for name, rs in results.items():
