@@ -51,6 +51,41 @@ def terminal_sigint() -> None:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+# ---------------------------------------------------------------- the Panda of issue 37
+#: What a child process run on another ncgen tree executes first to have :func:`panda`
+#: (this folder put on its path; ncgen comes from the tree's ``PYTHONPATH``).
+PANDA_IMPORT = f"import sys; sys.path.insert(0, {str(Path(__file__).resolve().parent)!r}); from common import panda\n"
+
+
+def panda(urdf: str = "fall"):
+    """``(model, start)``: example-robot-data's Panda built by the ncgen on the path, and
+    ``start(k) -> (q, v)``, its joints at ``linspace(-0.8, 0.9)`` rad moved by ``1e-3 k`` rad
+    each, at rest, in natural coordinates (issue 37's runs: ``simulate_fixed_cost.py``,
+    ``simulate_start_callgrind.py``).  ``urdf="fall"``: its ``<mimic>`` and ``<dynamics>``
+    tags dropped (joint_simulation.py's fall, as for MuJoCo); ``"stock"``: as shipped, the
+    second finger placed where its mimic map puts it."""
+    import importlib.metadata as md
+
+    import ncgen as nc
+
+    rel = "panda_description/urdf/panda.urdf"
+    path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
+    text = Path(path).read_text()
+    stock = urdf == "stock"
+    if not stock:
+        text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
+    model = nc.System.from_urdf(text).build()
+    js = model.joint_space
+    sl = js.slices()
+
+    def start(k: int):
+        qj = np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k
+        if stock:
+            qj[sl["panda_finger_joint2"]] = qj[sl["panda_finger_joint1"]]
+        return model.from_joint_space(qj, np.zeros(js.nv))
+    return model, start
+
+
 # ---------------------------------------------------------------- machine
 def callgrind_rows(code: str, args: list[str], tree) -> list[tuple[int, str]]:
     """``(inclusive instructions, function)`` rows of ``callgrind_annotate`` for ``python -c code

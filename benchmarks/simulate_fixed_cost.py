@@ -26,32 +26,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine, terminal_sigint  # noqa: E402
+from common import PANDA_IMPORT, machine, terminal_sigint  # noqa: E402
 
 terminal_sigint()
 
-CHILD = r"""
-import json, re, sys, time
-import importlib.metadata as md
+CHILD = PANDA_IMPORT + r"""
+import json, time
 import numpy as np
 import ncgen as nc
 
-rel = "panda_description/urdf/panda.urdf"
-path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
-text = open(path).read()
-stock = sys.argv[2] == "stock"
-if not stock:                           # the fall's model (benchmarks/joint_simulation.py)
-    text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
-model = nc.System.from_urdf(text).build()
+model, start = panda(sys.argv[2])
 js = model.joint_space
-sl = js.slices()
-
-def start(k):
-    qj = np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k
-    if stock:                           # the second finger where its mimic map puts it
-        qj[sl["panda_finger_joint2"]] = qj[sl["panda_finger_joint1"]]
-    return model.from_joint_space(qj, np.zeros(js.nv))
-
 q0, v0 = start(0)
 kernels = sys.argv[3]
 run = lambda: nc.simulate(model, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-3, atol=1e-3, kernels=kernels)

@@ -21,20 +21,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import callgrind_rows, machine  # noqa: E402
+from common import PANDA_IMPORT, callgrind_rows, machine  # noqa: E402
 
-CHILD = r"""
-import os, re, subprocess, sys, importlib.metadata as md
-import numpy as np
+CHILD = PANDA_IMPORT + r"""
+import os, subprocess
 import ncgen as nc
 
-rel = "panda_description/urdf/panda.urdf"
-path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
-text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", open(path).read()))
-model = nc.System.from_urdf(text).build()
-js = model.joint_space
+model, start = panda()
 calls = int(sys.argv[1])
-starts = [model.from_joint_space(np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k, np.zeros(js.nv)) for k in range(calls + 20)]
+starts = [start(k) for k in range(calls + 20)]
 run = lambda q, v: nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3,
                                kernels=sys.argv[2])
 for q, v in starts[calls:]:
