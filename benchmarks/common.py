@@ -51,6 +51,57 @@ def terminal_sigint() -> None:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+# ---------------------------------------------------------------- the Panda of issue 37
+#: What a child process run on another ncgen tree executes first to have :func:`panda`
+#: (this folder put on its path; ncgen comes from the tree's ``PYTHONPATH``).
+MODEL_IMPORT = f"import sys; sys.path.insert(0, {str(Path(__file__).resolve().parent)!r}); from common import start_model\n"
+#: Titles of :func:`start_model`'s models.
+START_MODELS = {"fall": "panda (the fall's URDF)", "stock": "panda (the URDF as shipped)",
+                "talos": "talos (talos_reduced.urdf as shipped, free-flyer base)",
+                "solo12": "solo12 (solo12.urdf as shipped, free-flyer base)",
+                "balls": "balls (4 bodies on spherical joints)"}
+
+
+def start_model(which: str = "fall"):
+    """``(model, start)``: a tree built by the ncgen on the path, and ``start(k) -> (q, v)``, its
+    joints at ``linspace(-0.8, 0.9)`` (rad, m; quaternions normalised by ``from_joint_space``)
+    moved by ``1e-3 k`` each, at rest, in natural coordinates (issue 37's runs:
+    ``simulate_fixed_cost.py``, ``simulate_start_callgrind.py``).  ``which``
+    (:data:`START_MODELS`): example-robot-data's Panda, ``"fall"`` with its ``<mimic>`` and
+    ``<dynamics>`` tags dropped (joint_simulation.py's fall, as for MuJoCo) or ``"stock"`` as
+    shipped (the second finger placed where its mimic map puts it); Talos reduced or Solo12 as
+    shipped on a free-flyer base; ``"balls"``: a chain of 4 bodies on spherical joints."""
+    import importlib.metadata as md
+
+    import ncgen as nc
+
+    if which == "balls":
+        s = nc.System("balls", gravity=(0.0, 0.0, -9.81))
+        prev = s.ground
+        for k in range(4):
+            b = s.add_body(f"b{k}", mass=1.0, inertia=np.diag([0.02, 0.03, 0.04]), position=(0.3 * k + 0.15, 0, 0))
+            s.add_joint(nc.Spherical(prev, b, at=(0.3 * k, 0, 0), name=f"ball{k}"))
+            prev = b
+        model = s.build()
+    else:
+        rel = {"talos": "talos_data/robots/talos_reduced.urdf", "solo12": "solo_description/robots/solo12.urdf"}.get(
+            which, "panda_description/urdf/panda.urdf")
+        path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
+        text = Path(path).read_text()
+        if which == "fall":
+            text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
+        model = nc.System.from_urdf(text, floating_base=which in ("talos", "solo12")).build()
+    js = model.joint_space
+    sl = js.slices()
+
+    def start(k: int):
+        qj = np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k
+        if which == "stock":
+            qj[sl["panda_finger_joint2"]] = qj[sl["panda_finger_joint1"]]
+        return model.from_joint_space(qj, np.zeros(js.nv))
+    return model, start
+
+
 # ---------------------------------------------------------------- machine
 def callgrind_rows(code: str, args: list[str], tree) -> list[tuple[int, str]]:
     """``(inclusive instructions, function)`` rows of ``callgrind_annotate`` for ``python -c code

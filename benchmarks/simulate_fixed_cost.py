@@ -11,10 +11,11 @@ alone (``JointSpace._checked_state`` at new starts) is timed too.  ``--urdf stoc
 the Panda as shipped (its second finger mimics the first) in place of the fall's.  ``--model talos``,
 ``--model solo12``: Talos reduced or Solo12 of example-robot-data as shipped, on a free-flyer base
 (floating-base trees: free, revolute and fixed joints); ``--model balls``: a chain of 4 bodies on
-spherical joints.
+spherical joints (``common.start_model``).  ``--kernels flat`` (or ``tables``): the run's kernels
+(``nc.simulate(..., kernels=...)``), default ``auto``.
 
     python benchmarks/simulate_fixed_cost.py [--before DIR] [--rounds 7] [--calls 200] [--urdf fall|stock]
-                                             [--model panda|talos|solo12|balls]
+                                             [--model panda|talos|solo12|balls] [--kernels auto|tables|flat]
 """
 from __future__ import annotations
 
@@ -29,45 +30,20 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine, terminal_sigint  # noqa: E402
+from common import MODEL_IMPORT, START_MODELS, machine, terminal_sigint  # noqa: E402
 
 terminal_sigint()
 
-CHILD = r"""
-import json, re, sys, time
-import importlib.metadata as md
+CHILD = MODEL_IMPORT + r"""
+import json, time
 import numpy as np
 import ncgen as nc
 
-which = sys.argv[2]
-rel = {"talos": "talos_data/robots/talos_reduced.urdf", "solo12": "solo_description/robots/solo12.urdf"}.get(
-    which, "panda_description/urdf/panda.urdf")
-stock = which == "stock"
-if which == "balls":                    # a chain of 4 bodies on spherical joints, hanging from the ground
-    s = nc.System("balls", gravity=(0.0, 0.0, -9.81))
-    prev = s.ground
-    for k in range(4):
-        b = s.add_body(f"b{k}", mass=1.0, inertia=np.diag([0.02, 0.03, 0.04]), position=(0.3 * k + 0.15, 0, 0))
-        s.add_joint(nc.Spherical(prev, b, at=(0.3 * k, 0, 0), name=f"ball{k}"))
-        prev = b
-    model = s.build()
-else:
-    path = next(f.locate() for f in md.files("example-robot-data") if str(f).endswith(rel))
-    text = open(path).read()
-    if which == "fall":                 # the fall's model (benchmarks/joint_simulation.py)
-        text = re.sub(r"<dynamics[^>]*/>", "", re.sub(r"<mimic[^>]*/>", "", text))
-    model = nc.System.from_urdf(text, floating_base=which in ("talos", "solo12")).build()
+model, start = start_model(sys.argv[2])
 js = model.joint_space
-sl = js.slices()
-
-def start(k):
-    qj = np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k
-    if stock:                           # the second finger where its mimic map puts it
-        qj[sl["panda_finger_joint2"]] = qj[sl["panda_finger_joint1"]]
-    return model.from_joint_space(qj, np.zeros(js.nv))     # (quaternions normalised by from_joint_space)
-
 q0, v0 = start(0)
-run = lambda: nc.simulate(model, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-3, atol=1e-3)
+kernels = sys.argv[3]
+run = lambda: nc.simulate(model, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-3, atol=1e-3, kernels=kernels)
 for _ in range(20):
     tr = run()
 calls = int(sys.argv[1])
@@ -79,7 +55,7 @@ out = {"cpu": (time.process_time() - c) / calls, "wall": (time.perf_counter() - 
 starts = [start(k) for k in range(calls)]
 c = time.process_time()
 for q, v in starts:                     # a new start each call: its start check is not kept from an earlier run
-    nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3)
+    nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3, kernels=kernels)
 out["cpu_new_start"] = (time.process_time() - c) / calls
 try:                                    # the start check alone at new starts (its C where the tree library has it)
     from ncgen.runtime.tree_library import loaded_tree_start
@@ -118,15 +94,9 @@ print(json.dumps(out))
 """
 
 
-TITLES = {"fall": "panda (the fall's URDF)", "stock": "panda (the URDF as shipped)",
-          "talos": "talos (talos_reduced.urdf as shipped, free-flyer base)",
-          "solo12": "solo12 (solo12.urdf as shipped, free-flyer base)",
-          "balls": "balls (4 bodies on spherical joints)"}
-
-
-def child(tree: Path, calls: int, urdf: str) -> dict:
+def child(tree: Path, calls: int, which: str, kernels: str) -> dict:
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    out = subprocess.run([sys.executable, "-c", CHILD, str(calls), urdf], env=env, cwd=tree, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", CHILD, str(calls), which, kernels], env=env, cwd=tree, capture_output=True, text=True,
                          check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
@@ -146,6 +116,8 @@ def main(argv=None) -> None:
     ap.add_argument("--model", choices=("panda", "talos", "solo12", "balls"), default="panda",
                     help="the Panda (--urdf), Talos reduced or Solo12 as shipped on a free-flyer base "
                          "(example-robot-data), or a chain of 4 bodies on spherical joints")
+    ap.add_argument("--kernels", choices=("auto", "tables", "flat"), default="auto",
+                    help="the run's kernels (nc.simulate's kernels=): the tree tables' loop or the model's own")
     ap.add_argument("--smoke", action="store_true", help="2 rounds of 20 calls (CI)")
     a = ap.parse_args(argv)
     which = a.urdf if a.model == "panda" else a.model
@@ -157,8 +129,8 @@ def main(argv=None) -> None:
     results = {k: [] for k in trees}
     for _ in range(a.rounds):
         for name, tree in trees.items():
-            results[name].append(child(tree, a.calls, which))
-    print(f"\n=== {TITLES[which]}: nc.simulate of one 1 ms output step (DOPRI5, rtol = atol = 1e-3), {a.calls} calls "
+            results[name].append(child(tree, a.calls, which, a.kernels))
+    print(f"\n=== {START_MODELS[which]}: nc.simulate of one 1 ms output step (DOPRI5, rtol = atol = 1e-3), {a.calls} calls "
           f"per round, {a.rounds} rounds")
     for name, rs in results.items():
         print(f"  {name}: {rs[0]['file']} (kernels {rs[0]['kernels']}, {rs[0]['stats']})")

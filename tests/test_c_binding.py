@@ -94,15 +94,12 @@ def test_a_library_or_symbol_that_is_not_there_is_named(tmp_path):
 
 
 def test_joint_run_matches_the_joint_loop_template():
-    """``<name>_joint_run`` as templates/c/joint_loop.c.j2 (the model's glue around
-    runtime/ncgen_joint_loop.h) defines it is JOINT_RUN."""
-    from ncgen.codegen.joint_loop import JOINT_RUN
+    """``<name>_joint_run`` and ``<name>_joint_work_size`` as templates/c/joint_loop.c.j2 (the
+    model's glue around runtime/ncgen_joint_loop.h) defines them are JOINT_RUN and JOINT_WORK_SIZE."""
+    from ncgen.codegen.joint_loop import JOINT_RUN, JOINT_WORK_SIZE
 
-    text = (ROOT / "templates" / "c" / "joint_loop.c.j2").read_text().replace("{{ name }}", "m")
-    returns, args = re.search(r"^(\w+) m_joint_run\(([^)]*)\)\s*\{", text, flags=re.M).groups()
-    assert returns == JOINT_RUN.returns
-    assert [c_type(re.sub(r"\w+\s*$", "", a)) for a in args.split(",")] == JOINT_RUN.types("m")
-    assert [re.search(r"(\w+)\s*$", a).group(1) for a in args.split(",")] == [n for _, n in JOINT_RUN.args]
+    declared = definitions(template("joint_loop.c.j2", name="m"), "m_joint_")
+    assert_table_matches({"run": JOINT_RUN, "work_size": JOINT_WORK_SIZE}, declared)
 
 
 def definitions(text: str, prefix: str) -> dict[str, tuple[str, list[tuple[str, str]]]]:

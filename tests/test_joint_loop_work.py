@@ -1,6 +1,7 @@
-"""The tree library's joint-space loop on memory kept between runs (issue 37): each thread's
-work array (:meth:`~ncgen.runtime.tree_library.TableJointLoop.work`) is made once and reused,
-never zeroed again, so a run must not depend on what an earlier run left in it.  Checked bit
+"""The joint-space loops on memory kept between runs (issue 37): the tree library's loop on the
+model's tables and the model's own compiled (flat) loop.  Each thread's work array
+(``loop.work``, :class:`~ncgen.codegen.c_binding.ThreadWork`) is made once and reused, never
+zeroed again, so a run must not depend on what an earlier run left in it.  Checked bit
 for bit against the same run on fresh, zeroed memory (a new loop object: what a new process
 allocates), after other runs (another state, length, tolerance and integrator) and on work
 filled with NaN or huge values (a read of any stale value would show), and on two threads at
@@ -19,7 +20,7 @@ import pytest
 import ncgen as nc
 from ncgen.codegen.compiler import CANDIDATES
 from ncgen.codegen.joint_loop import joint_options, run_options
-from ncgen.runtime.joint_simulation import joint_loop
+from ncgen.runtime.joint_simulation import JointLoop, joint_loop
 from ncgen.runtime.tree_library import TableJointLoop
 
 pytestmark = pytest.mark.skipif(not any(shutil.which(c) for c in CANDIDATES) and not os.environ.get("CC"),
@@ -60,19 +61,34 @@ def run(loop, model, x0, t_end: float, n: int, integrator: str, tol: float):
     return X, stats
 
 
-def test_a_run_after_other_runs_equals_a_run_on_fresh_memory(model):
+#: The loops: the tables' (the tree library, compiled once for every model) and the model's own
+#: (its ODE compiled with the loop: slow on a fresh cache).
+KERNELS = ["tables", pytest.param("flat", marks=pytest.mark.slow)]
+
+
+def fresh_loop(model, kernels: str):
+    """A new loop object of ``model`` with the kernels ``kernels`` (its work not made yet: zeroed
+    at its first run, as a new process's), beside the one the model keeps."""
+    if kernels == "tables":
+        return TableJointLoop(model)
+    kept = joint_loop(model, kernels="flat")
+    return JointLoop(model, kept.library, kept.ode, f"{model.name}_jsim")
+
+
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_a_run_after_other_runs_equals_a_run_on_fresh_memory(model, kernels):
     """The same run on fresh zeroed work, after other runs on kept work, and on work filled
     with NaN or 1e300: bit-equal states and statistics; ``nc.simulate`` on the model's own
     loop the same after those runs, conserving energy."""
     case = (start(model, 1), 0.3, 6, "dopri5", 1e-6)
-    fresh = run(TableJointLoop(model), model, *case)
-    loop = joint_loop(model, kernels="tables")
-    fall = lambda: nc.simulate(model, 0.3, 0.05, method="joint", kernels="tables", rtol=1e-9, atol=1e-9)
+    fresh = run(fresh_loop(model, kernels), model, *case)
+    loop = joint_loop(model, kernels=kernels)
+    fall = lambda: nc.simulate(model, 0.3, 0.05, method="joint", kernels=kernels, rtol=1e-9, atol=1e-9)
     first = fall()
     run(loop, model, start(model, 2), 0.5, 3, "rk4", 0.0)
     run(loop, model, start(model, 3), 0.05, 1, "dopri5", 1e-3)
     after = run(loop, model, *case)
-    work = loop.work()[0]
+    work = loop.work.array
     for stale in (np.nan, 1e300):
         work[:] = stale
         again = run(loop, model, *case)
@@ -83,14 +99,16 @@ def test_a_run_after_other_runs_equals_a_run_on_fresh_memory(model):
     assert fresh[1][0] > 5 and np.all(np.isfinite(fresh[0]))
     later = fall()
     assert np.array_equal(later.qj, first.qj) and np.array_equal(later.vj, first.vj)
-    assert first.info["kernels"] == "tables" and np.ptp(first.qj, axis=0).max() > 0.1
+    assert first.info["kernels"] == kernels and np.ptp(first.qj, axis=0).max() > 0.1
     assert first.energy_drift <= 1e-6 * max(1.0, first.energy_scale)
 
 
-def test_runs_on_two_threads_have_their_own_work(model):
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_runs_on_two_threads_have_their_own_work(model, kernels):
     """Runs of one loop on two threads at once (other starts, other lengths) equal the same
-    runs one after the other bit for bit; each thread has its own work array."""
-    loop = TableJointLoop(model)
+    runs one after the other bit for bit; each thread has its own work array (each kept by the
+    test, so that a thread's end cannot free its array for the other's to take the address)."""
+    loop = fresh_loop(model, kernels)
     cases = {i: [(start(model, 10 * i + k), 0.1 + 0.05 * k, 2 + k, "dopri5", 1e-7) for k in range(6)]
              for i in range(2)}
     serial = {i: [run(loop, model, *c) for c in cs] for i, cs in cases.items()}
@@ -99,13 +117,14 @@ def test_runs_on_two_threads_have_their_own_work(model):
     def worker(i):
         barrier.wait()
         threaded[i] = [run(loop, model, *c) for c in cases[i] for _ in range(3)][::3]
-        works[i] = loop.work()[1]
+        works[i] = loop.work.array
     threads = [threading.Thread(target=worker, args=(i,)) for i in range(2)]
     for th in threads:
         th.start()
     for th in threads:
         th.join()
-    assert works[0] != works[1] and loop.work()[1] not in works.values()
+    addresses = {w.ctypes.data for w in works.values()}
+    assert len(addresses) == 2 and loop.work.address not in addresses
     for i in range(2):
         for (Xa, sa), (Xb, sb) in zip(threaded[i], serial[i]):
             assert np.array_equal(Xa, Xb) and np.array_equal(sa, sb)

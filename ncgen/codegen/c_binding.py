@@ -16,8 +16,11 @@ from __future__ import annotations
 
 import ctypes
 import re
+import threading
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from ncgen.errors import CodegenError
 
@@ -85,6 +88,18 @@ def address(a) -> int | None:
         return ctypes.addressof(_BYTE.from_buffer(a))
     except TypeError:                       # read-only
         return a.ctypes.data
+
+
+class ThreadWork(threading.local):
+    """A C loop's work array for the calling thread: ``array`` (``size`` doubles, zeroed) and
+    its ``address``, made at the thread's first use and kept (``threading.local`` runs
+    ``__init__`` again, with the same ``size``, in every other thread that uses the object):
+    runs in one thread follow each other, runs in other threads have their own.  For loops that
+    read no value of their work before writing it (never zeroed again)."""
+
+    def __init__(self, size: int):
+        self.array = np.zeros(int(size))
+        self.address = self.array.ctypes.data
 
 
 def open_library(path: str | Path) -> ctypes.CDLL:

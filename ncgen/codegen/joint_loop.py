@@ -6,7 +6,9 @@ and the model's glue ``templates/c/joint_loop.c.j2`` compiled into one library, 
 content (:mod:`ncgen.codegen.compile_cache`).
 
 The library exports ``<name>_joint_run`` (:data:`JOINT_RUN`, defined by the glue, its status
-codes by the runtime; ``tests/test_c_binding.py`` checks the definition and the table agree)."""
+codes by the runtime; ``tests/test_c_binding.py`` checks the definition and the table agree)
+and ``<name>_joint_work_size`` (:data:`JOINT_WORK_SIZE`): the doubles of the work array a run
+takes from its caller, one per thread and reused (nothing is allocated per run)."""
 from __future__ import annotations
 
 import ctypes
@@ -52,11 +54,14 @@ class JointOptions(ctypes.Structure):
     _fields_ = structure(JOINT_OPTIONS)
 
 
-#: ``{name}_joint_run`` as templates/c/joint_loop.c.j2 defines it.
+#: ``{name}_joint_run`` as templates/c/joint_loop.c.j2 defines it (``work``: the calling
+#: thread's ``{name}_joint_work_size()`` doubles, :class:`~ncgen.codegen.c_binding.ThreadWork`).
 JOINT_RUN = Signature("int", (
     ("const ncgen_joint_options *", "options"), ("int", "n_out"), ("const double *", "t_out"), ("double *", "X"),
     ("const double *", "W"), ("const double *", "S"), ("const double *", "p"), ("int", "nquat"),
-    ("const int *", "quat"), ("double *", "stats"), ("int *", "k_done")))
+    ("const int *", "quat"), ("double *", "stats"), ("int *", "k_done"), ("double *", "work")))
+#: ``{name}_joint_work_size`` as templates/c/joint_loop.c.j2 defines it.
+JOINT_WORK_SIZE = Signature("long", ())
 
 
 def joint_options(integrator: str | None, rtol: float | None, atol: float | None, substeps: int, max_steps: int,

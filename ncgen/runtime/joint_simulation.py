@@ -55,8 +55,7 @@ CHUNKS = 20
 _STATUS = {1: "the joint-space mass matrix is singular or the accelerations are not finite",
            2: "the integrator needed more than max_steps steps for one output interval (a stiff motion: "
               "a stiff joint limit or friction law; raise max_steps, loosen rtol, or use method='idas')",
-           3: "the step size fell to round-off (a discontinuity or a stiff law)",
-           4: "out of memory"}
+           3: "the step size fell to round-off (a discontinuity or a stiff law)"}
 
 
 def joint_space_applies(model) -> str | None:
@@ -105,14 +104,16 @@ class JointLoop:
 
     def __init__(self, model, library, ode: ca.Function, name: str):
         from ncgen.assembly.joint_ode import quaternion_offsets
-        from ncgen.codegen.c_binding import bind, open_library
-        from ncgen.codegen.joint_loop import JOINT_RUN, JointOptions
+        from ncgen.codegen.c_binding import ThreadWork, bind, open_library
+        from ncgen.codegen.joint_loop import JOINT_RUN, JOINT_WORK_SIZE, JointOptions
         from ncgen.codegen.tree_check import tree_function
 
         self.model, self.ode, self.library = model, ode, library
         self._lib = open_library(library)
         self._fn = bind(self._lib, f"{name}_joint_run", JOINT_RUN, structs={"ncgen_joint_options": JointOptions},
                         addresses=True)
+        #: The calling thread's work array and its address (the library's ``joint_work_size`` doubles).
+        self.work = ThreadWork(bind(self._lib, f"{name}_joint_work_size", JOINT_WORK_SIZE)())
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
         self._quat = address(self.quat)                 # taken once
         self.tree = tree_function(model)
@@ -136,7 +137,7 @@ class JointLoop:
         status, interrupted = call_interruptibly(
             self._fn, ctypes.addressof(options), len(t) - 1, address(t), address(X), address(W),
             None if S is None else address(S), address(p), len(self.quat), self._quat, address(stats),
-            ctypes.addressof(done), stop=options.stop.contents)
+            ctypes.addressof(done), self.work.address, stop=options.stop.contents)
         return INTERRUPTED if interrupted else int(status), int(done.value)
 
 

@@ -645,7 +645,8 @@ class TableJointLoop:
         self._constants = (ptr(self.E), model.nu, ptr(self.quat))        # addresses taken once (µs each)
         self.tree = tree_function(model)
         self._maps: dict = {}
-        self._work = threading.local()
+        #: The calling thread's work array and its address (the library's ``work_size`` doubles).
+        self.work = c_binding.ThreadWork(self.tree_bound.work.size)
 
     def mapped(self, what: str, n: int):
         """``what`` (``"tree"``, ``"accel"``: CasADi functions mapped over ``n`` points;
@@ -657,16 +658,6 @@ class TableJointLoop:
             self._maps[key] = {"tree": self.tree, "accel": self.model.functions["accel"]}[what].map(n)
         return self._maps[key]
 
-    def work(self) -> tuple[np.ndarray, int]:
-        """The calling thread's work array of the loop (the library's ``work_size`` doubles) and
-        its address, made at its first run in that thread and kept: runs in one thread follow
-        each other, runs in other threads have their own (the loop needs no zeroed work)."""
-        work = getattr(self._work, "array", None)
-        if work is None:
-            array = np.zeros(self.tree_bound.work.size)
-            work = self._work.array = (array, array.ctypes.data)
-        return work
-
     def run(self, options: JointOptions, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray,
             stats: np.ndarray) -> tuple[int, int]:
         """As ``JointLoop.run`` (``p`` does not enter: the tables' dynamics take none)."""
@@ -676,7 +667,7 @@ class TableJointLoop:
         address = c_binding.address
         args = (self._fn, self.tree_bound.ref, E, nu, ctypes.addressof(options), len(t) - 1, address(t), address(X),
                 address(W), None if S is None else address(S), len(self.quat), quat, address(stats),
-                ctypes.addressof(done), self.work()[1])
+                ctypes.addressof(done), self.work.address)
         status, interrupted = call_interruptibly(*args, stop=options.stop.contents)
         if not interrupted and status == RUN_NO_FALLBACK:
             self.tree_bound.library.set_fallback()

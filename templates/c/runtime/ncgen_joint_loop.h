@@ -35,7 +35,7 @@
 #define JOINT_SINGULAR 1        /* singular or non-finite dynamics */
 #define JOINT_TOO_MANY_STEPS 2  /* more than max_steps steps per output interval */
 #define JOINT_STEP_UNDERFLOW 3  /* step size underflow */
-#define JOINT_NO_MEMORY 4       /* out of memory (the glue's allocations) */
+/* 4 is not used: no glue allocates (the code once said out of memory; the others keep their numbers) */
 #define JOINT_STOPPED 5         /* stopped through *stop */
 
 /* The joint loop's options (fields as described at the top of this file). */
