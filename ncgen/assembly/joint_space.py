@@ -45,8 +45,12 @@ OFF_MANIFOLD_TOL = 1e-4
 #: is to its square) of a start's q from the tree's natural coordinates at its joint positions
 #: that the tree library's start check accepts; its rates within ``TREE_V_TOL (1 + |v|∞)``.
 #: The residuals (quadratic in q) grow by about ``2 |q|`` per unit of distance, so these are
-#: :func:`_holding`'s tolerances in the coordinates' own units: the two decide alike but within
-#: a small factor of their limits.  Round-off of the check on the Panda: 4e-14 and 2e-13.
+#: :func:`_holding`'s tolerances in the coordinates' own units; rows with coefficients ~1/L (short
+#: members) grow faster, so near the limits the two can differ: moved along one coordinate to this
+#: distance, the Panda's start has residuals up to ~300 times :func:`_holding`'s (measured at
+#: stop 60).  Either way a start is kept within this distance (relative) of a tree state: the C's
+#: joint state is that state, CasADi's refusal projects onto the constraints.  Round-off of the
+#: check on the Panda: 4e-14 and 2e-13.
 TREE_Q_TOL = 1e-13
 TREE_V_TOL = 1e-11
 #: Starts that passed a joint run's start check kept per model (``JointSpace._checked_state``, ~1 µs
