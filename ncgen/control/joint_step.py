@@ -18,7 +18,9 @@ These formulas are :func:`step_jacobians_function`, compiled once per ``n`` (cac
 and called in one C call on the kernel's output buffers, returning fresh ``(x⁺, A, B)`` or
 writing them into ``out=`` (:func:`~ncgen.codegen.fast_call.fast_caller`'s door: a call costs
 the kernel and about 1 µs); without a C compiler, the extension or a flat kernel, CasADi
-evaluates the same function.
+evaluates the same function.  A call (``x⁺`` alone) is ABA's kernel and the first of those
+formulas, :func:`step_function_of_n`, compiled the same way (one more C call on ABA's output
+buffer; ``out=`` too); without it NumPy computes them.
 
 It is time-invariant; :func:`ncgen.control.ilqr.ilqr` takes it as it takes a natural-coordinate
 step (Gauss–Newton: no second derivatives of this step; the parameters are those given here).
@@ -51,6 +53,19 @@ def joint_step_refusal(model) -> str | None:
     return None
 
 
+def _next_state(h, a, x, n: int):
+    """``x⁺ = [q + h v⁺; v⁺]`` with ``v⁺ = v + h a`` (module docstring), one expression for the
+    step and its Jacobians (so that both give the same ``x⁺`` to the last bit)."""
+    v1 = a * h + x[n:]
+    return ca.vertcat(v1 * h + x[:n], v1)
+
+
+def step_function_of_n(n: int) -> ca.Function:
+    """``(h, a, x) -> x⁺``: the step (module docstring) from ABA's accelerations at ``x = [q; v]``."""
+    h, a, x = ca.SX.sym("h"), ca.SX.sym("a", n), ca.SX.sym("x", 2 * n)
+    return ca.Function("joint_step", [h, a, x], [_next_state(h, a, x, n)], ["h", "a", "x"], ["x1"])
+
+
 def step_jacobians_function(n: int) -> ca.Function:
     """``(h, a, da_dq, da_dv, Minv, x) -> (x⁺, A, B)``: the step and its Jacobians (module
     docstring) from ABA's outputs at ``x = [q; v]`` (``n`` rates; matrices ``n × n``, stored
@@ -58,17 +73,38 @@ def step_jacobians_function(n: int) -> ca.Function:
     h, a, x = ca.SX.sym("h"), ca.SX.sym("a", n), ca.SX.sym("x", 2 * n)
     da_dq, da_dv, Minv = (ca.SX.sym(name, n, n) for name in ("da_dq", "da_dv", "Minv"))
     eye, zero = ca.SX.eye(n), ca.SX.zeros(n, n)
-    v1 = a * h + x[n:]
     Av = ca.horzcat(da_dq * h, da_dv * h)                  # ∂v⁺/∂x − [0, I]
     A = ca.vertcat(Av * h + ca.horzcat(eye, h * eye), Av + ca.horzcat(zero, eye))
     B = ca.vertcat(Minv * h * h, Minv * h)
     return ca.Function("joint_step_jacobians", [h, a, da_dq, da_dv, Minv, x],
-                       [ca.vertcat(v1 * h + x[:n], v1), ca.densify(A), ca.densify(B)],
+                       [_next_state(h, a, x, n), ca.densify(A), ca.densify(B)],
                        ["h", "a", "da_dq", "da_dv", "Minv", "x"], ["x1", "A", "B"])
 
 
 #: ``{(n, $NCGEN_CFLAGS): DirectFunction}``: :func:`step_jacobians_function` compiled, per process.
 _COMPILED: dict = {}
+#: ``{(n, $NCGEN_CFLAGS): DirectFunction}``: :func:`step_function_of_n` compiled, per process.
+_COMPILED_STEP: dict = {}
+
+
+def compiled_step(n: int, h: float):
+    """``step(a, x)`` or ``step(a, x, out)``: ``x⁺`` from ABA's accelerations ``a`` at ``x`` in
+    one C call, a fresh array or written into ``out`` (a ValueError for a bad ``out``); None
+    without a C compiler or the extension."""
+    from ncgen.codegen.direct import compile_direct
+    from ncgen.codegen.fast_call import fast_caller
+
+    key = n, os.environ.get("NCGEN_CFLAGS")
+    if key not in _COMPILED_STEP:
+        try:
+            _COMPILED_STEP[key] = compile_direct(f"joint_step_{n}", step_function_of_n(n))
+        except CompilerNotFound:
+            _COMPILED_STEP[key] = None
+    if _COMPILED_STEP[key] is None:
+        return None
+    direct = _COMPILED_STEP[key].copy()                     # buffers of its own: h is this step's
+    direct.inputs[0][0] = h
+    return fast_caller(direct, 2, first=1, outputs=[(direct.outputs[0], 2 * n, 0)])
 
 
 def compiled_assembly(kernel, n: int, h: float):
@@ -121,6 +157,33 @@ class JointStep:
         self._derivatives = kernel_of(model, "aba_derivatives", kernels)
         self._assemble = compiled_assembly(self._derivatives, n, h)
         self._function = None if self._assemble is not None else step_jacobians_function(n)
+        self._aba = kernel_of(model, "aba", kernels)
+        self._step = compiled_step(n, h)
+        #: Whether a call and :meth:`jacobians` go straight to the C callers (flat kernels with the
+        #: model's parameters, the compiled formulas): see :meth:`_straight`.
+        self._straight_call = self._step is not None and self._takes(self._aba)
+        self._straight_jacobians = self._assemble is not None and self._takes(self._derivatives)
+
+    def _takes(self, k) -> bool:
+        """Whether the kernel ``k`` can be called straight (:meth:`_straight`)."""
+        return isinstance(k, AlgorithmKernel) and k._fast is not None and self.p is None and not k._quaternions
+
+    def _straight(self, k, assemble, x, tau, out):
+        """The kernel ``k`` (ABA or its derivatives, flat, at ``t = 0`` and the model's
+        parameters) at ``x = [q; v]``, ``tau`` and its outputs through ``assemble`` (fresh or
+        into ``out``), every check in C (lengths, kinds, finite values of magnitude at most
+        :data:`~ncgen.validation.MAX_MAGNITUDE`, ``out``); None for the checked path, whose
+        error names what is wrong."""
+        if not (k._t == 0.0 and k._default_p):
+            k._at(0.0, None)
+        n = self.n
+        try:
+            outputs = k._fast(x[:n], x[n:], tau)
+            if outputs is None:
+                return None
+            return assemble(outputs, x) if out is None else assemble(outputs, x, out)
+        except (TypeError, ValueError, OverflowError, KeyError, IndexError):
+            return None
 
     def _split(self, x, tau):
         """``x, tau`` as float vectors of the right sizes (float64 vectors of those sizes pass
@@ -136,10 +199,15 @@ class JointStep:
             raise NcgenError(f"JointStep.{what}: p: the parameters are fixed when the step is made "
                              f"(JointStep(model, h, p=...)); got p = {p!r}")
 
-    def __call__(self, x, tau, p=None, t=None) -> np.ndarray:
-        """``x⁺`` (``t``, s, is ignored: the step is time-invariant)."""
+    def __call__(self, x, tau, p=None, t=None, *, out=None) -> np.ndarray:
+        """``x⁺`` (``t``, s, is ignored: the step is time-invariant); ``out``: a writable
+        C-contiguous float64 array of ``2n`` values, written and returned."""
+        if self._straight_call and p is None:
+            x1 = self._straight(self._aba, self._step, x, tau, out)
+            if x1 is not None:
+                return x1
         self._same(p, "__call__")
-        return self.unchecked(*self._split(x, tau))
+        return self.unchecked(*self._split(x, tau), out=out)
 
     _inputs = StepFunction._inputs         # U: (N, nu) finite, checked as a natural-coordinate step's
 
@@ -160,19 +228,36 @@ class JointStep:
         U = self._inputs(U0).copy()
         return self._split(x0, U[0])[0], U, None, 0.0
 
-    def unchecked(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    def unchecked(self, x: np.ndarray, tau: np.ndarray, *, out=None) -> np.ndarray:
         """``x⁺`` of a float vector ``x`` and ``tau`` of the right sizes, unchecked (by ABA
-        alone, without its derivatives)."""
-        n, h = self.n, self.h
+        alone, without its derivatives; the kernel still refuses values that are not finite)."""
+        n, h, step = self.n, self.h, self._step
+        if step is not None:
+            a = buffers(self.model, self._aba, (x[:n], x[n:], tau), self.p, 0.0)
+            if out is None:
+                return step(a, x)
+            try:
+                return step(a, x, out)
+            except ValueError:              # a bad out: write_out names what is wrong with it
+                return write_out(out, step(a, x), "JointStep")
         v1 = x[n:] + h * aba(self.model, x[:n], x[n:], tau, p=self.p)
-        return np.concatenate([x[:n] + h * v1, v1])
+        x1 = np.concatenate([x[:n] + h * v1, v1])
+        return x1 if out is None else write_out(out, x1, "JointStep")
 
     def jacobians(self, x, tau, p=None, t=None, *, out=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(x⁺, A = ∂x⁺/∂x, B = ∂x⁺/∂τ)`` at ``(x, τ)`` (``t`` ignored); ``out``: a tuple of
         three writable C-contiguous float64 arrays of shapes ``(2n,)``, ``(2n, 2n)``, ``(2n, n)``,
         written and returned."""
+        if self._straight_jacobians and p is None:
+            result = self._straight(self._derivatives, self._assemble_outputs, x, tau, out)
+            if result is not None:
+                return result
         self._same(p, "jacobians")
         return self.unchecked_jacobians(*self._split(x, tau), out=out)
+
+    def _assemble_outputs(self, outputs, x, out=None):
+        """``(x⁺, A, B)`` from the derivatives kernel's buffers (``outputs``, just written) at ``x``."""
+        return self._assemble(x) if out is None else self._assemble(x, out)
 
     def unchecked_jacobians(self, x: np.ndarray, tau: np.ndarray, *,
                             out=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
