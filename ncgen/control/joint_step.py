@@ -186,13 +186,10 @@ class JointStep:
             return None
 
     def _split(self, x, tau):
-        """``x, tau`` as float vectors of the right sizes (float64 vectors of those sizes pass
-        as they are; their values are checked by the kernel in C)."""
-        if not (type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (self.nx,)):
-            x = as_vector(x, self.nx, "x (joint positions and rates [q_j; v_j])")
-        if not (type(tau) is np.ndarray and tau.dtype == np.float64 and tau.shape == (self.nu,)):
-            tau = as_vector(tau, self.nu, "tau (efforts of the joint rates)")
-        return x, tau
+        """``x, tau`` as finite float vectors of the right sizes, else the error naming the
+        argument (the checked path: a call the C callers take never comes here)."""
+        return (as_vector(x, self.nx, "x (joint positions and rates [q_j; v_j])"),
+                as_vector(tau, self.nu, "tau (efforts of the joint rates)"))
 
     def _same(self, p, what: str) -> None:
         if p is not None:
