@@ -12,11 +12,12 @@ over rows of states in one call (``--rows``, default 100):
   backend="compiled")`` (its kernel: the KKT solve), ``nc.step_function(model, h)`` called and
   its ``.jacobians`` (the table stepper's step, with and without Jacobians, called by a C loop).
 
-Per door: the door's best and median CPU µs per call (``time.process_time`` over batches of
-``--calls`` calls, ``--rounds`` batches), the kernel's best and median CPU ns per call in a C
-loop (``benchmarks/kernel_alone.py``; the table step through its own C signature), and
-``OVERHEAD`` = door − kernel alone (min and median), for rows per state.  The kernel alone
-runs on the same buffers with the same inputs as the door's last call.  CPU model and load
+Per door, in ``--rounds`` interleaved rounds: a batch of ``--calls`` calls of the door
+(``time.process_time``), then the kernel alone in a C loop of as many calls
+(``benchmarks/kernel_alone.py``; the table step through its own C signature), on the same
+buffers with the same inputs as the door's last call.  Printed: the door's CPU µs per call
+and the kernel's ns per call (min and median over the rounds), and ``OVERHEAD`` = door −
+kernel alone per round (min and median of the rounds' differences; per state for rows).  CPU model and load
 average are printed before and after: the figures are CPU times, but a shared machine's caches
 and frequency still move them.
 
@@ -85,17 +86,24 @@ def step_ns(table, x: np.ndarray, u: np.ndarray, t: float, jacobians: bool, call
     return min(times), float(np.median(times))
 
 
-def door_us(f, calls: int, rounds: int) -> tuple[float, float]:
-    """``(min, median)`` CPU µs per call of ``f`` over ``rounds`` batches of ``calls`` calls."""
+def interleaved(f, kernel, rows: int, calls: int, rounds: int) -> dict:
+    """Rounds of a batch of ``calls`` calls of the door ``f`` (``rows`` states a call) and of
+    ``kernel`` alone (``calls * rows`` calls in C): CPU µs per call of the door, ns per call of
+    the kernel and the door's overhead per state, µs, each as ``(min, median)`` over the rounds."""
     for _ in range(max(1, calls // 10)):
         f()
-    times = []
+    door, alone, over = [], [], []
     for _ in range(rounds):
         t = time.process_time()
         for _ in range(calls):
             f()
-        times.append((time.process_time() - t) / calls * 1e6)
-    return min(times), float(np.median(times))
+        d = (time.process_time() - t) / calls * 1e6
+        k = kernel(max(calls * rows, 200), 1)[0]
+        door.append(d)
+        alone.append(k)
+        over.append(d / rows - k / 1e3)
+    stat = lambda x: (min(x), float(np.median(x)))      # noqa: E731
+    return {"door": stat(door), "kernel": stat(alone), "overhead": stat(over)}
 
 
 def tree_doors(rows: int):
@@ -217,13 +225,10 @@ def main(argv=None) -> int:
         if a.only and a.only not in label:
             continue
         f()
-        calls = max(2, a.calls // rows)
-        d = door_us(f, calls, a.rounds)
-        k = kernel(max(a.calls, 200), a.rounds)
-        over = (d[0] - rows * k[0] / 1e3) / rows, (d[1] - rows * k[1] / 1e3) / rows
+        r = interleaved(f, kernel, rows, max(2, a.calls // rows), a.rounds)
+        (d0, d1), (k0, k1), (o0, o1) = r["door"], r["kernel"], r["overhead"]
         per = " per state" if rows > 1 else ""
-        print(f"  {label:<40} {d[0] / rows:8.2f} {d[1] / rows:8.2f} {k[0]:9.0f} {k[1]:9.0f}   "
-              f"OVERHEAD {over[0]:6.2f} {over[1]:6.2f}{per}")
+        print(f"  {label:<40} {d0 / rows:8.2f} {d1 / rows:8.2f} {k0:9.0f} {k1:9.0f}   OVERHEAD {o0:6.2f} {o1:6.2f}{per}")
     print(f"\nload average at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 

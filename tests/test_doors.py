@@ -258,11 +258,14 @@ def test_a_good_call_takes_the_c_door_only(tree, monkeypatch):
         CALLS[name](tree, x)
         CALLS[name](tree, [list(v) for v in x])                                  # lists of floats too
     with pytest.raises(AssertionError, match="checked path"):
-        nc.crba(tree, x[0], t=1.0)                                               # a new time: the checked path
-    with pytest.raises(AssertionError, match="checked path"):
         nc.aba(tree, x[0], x[1], x[3], p=tree.p0)                                # parameters given: the checked path
+    with pytest.raises(AssertionError, match="checked path"):
+        nc.crba(tree, x[0], p=tree.p0)
     nc.rnea(tree, *x[:3], t=1.0)                        # the tables' RNEA depends on no time: the C door still
-    nc.aba(tree, x[0], x[1], x[3], t=1.0)               # nor does this tree's ABA
+    nc.aba(tree, x[0], x[1], x[3], t=1.0)               # nor does this tree's ABA, CRBA or derivatives
+    nc.crba(tree, x[0], t=1.0)
+    nc.rnea_derivatives(tree, *x[:3], t=1.0)
+    nc.aba_derivatives(tree, x[0], x[1], x[3], t=2.0)
 
 
 def _recorded_flags(kernel) -> list[str]:

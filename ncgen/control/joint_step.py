@@ -168,12 +168,13 @@ class JointStep:
         """Whether the kernel ``k`` can be called straight (:meth:`_straight`)."""
         return isinstance(k, AlgorithmKernel) and k._fast is not None and self.p is None and not k._quaternions
 
-    def _straight(self, k, assemble, x, tau, out):
-        """The kernel ``k`` (ABA or its derivatives, flat, at ``t = 0`` and the model's
-        parameters) at ``x = [q; v]``, ``tau`` and its outputs through ``assemble`` (fresh or
-        into ``out``), every check in C (lengths, kinds, finite values of magnitude at most
-        :data:`~ncgen.validation.MAX_MAGNITUDE`, ``out``); None for the checked path, whose
-        error names what is wrong."""
+    def _straight(self, jacobians: bool, x, tau, out):
+        """ABA (or with ``jacobians`` its derivatives; flat kernels, at ``t = 0`` and the model's
+        parameters) at ``x = [q; v]``, ``tau`` and ``x⁺`` (and ``A``, ``B``) from its outputs in C,
+        fresh or into ``out``, every check in C (lengths, kinds, finite values of magnitude at
+        most :data:`~ncgen.validation.MAX_MAGNITUDE`, ``out``); None for the checked path,
+        whose error names what is wrong."""
+        k = self._derivatives if jacobians else self._aba
         if not (k._t == 0.0 and k._default_p):
             k._at(0.0, None)
         n = self.n
@@ -181,7 +182,9 @@ class JointStep:
             outputs = k._fast(x[:n], x[n:], tau)
             if outputs is None:
                 return None
-            return assemble(outputs, x) if out is None else assemble(outputs, x, out)
+            if jacobians:                   # the assembly reads the kernel's buffers itself
+                return self._assemble(x) if out is None else self._assemble(x, out)
+            return self._step(outputs, x) if out is None else self._step(outputs, x, out)
         except (TypeError, ValueError, OverflowError, KeyError, IndexError):
             return None
 
@@ -200,7 +203,7 @@ class JointStep:
         """``x⁺`` (``t``, s, is ignored: the step is time-invariant); ``out``: a writable
         C-contiguous float64 array of ``2n`` values, written and returned."""
         if self._straight_call and p is None:
-            x1 = self._straight(self._aba, self._step, x, tau, out)
+            x1 = self._straight(False, x, tau, out)
             if x1 is not None:
                 return x1
         self._same(p, "__call__")
@@ -246,15 +249,11 @@ class JointStep:
         three writable C-contiguous float64 arrays of shapes ``(2n,)``, ``(2n, 2n)``, ``(2n, n)``,
         written and returned."""
         if self._straight_jacobians and p is None:
-            result = self._straight(self._derivatives, self._assemble_outputs, x, tau, out)
+            result = self._straight(True, x, tau, out)
             if result is not None:
                 return result
         self._same(p, "jacobians")
         return self.unchecked_jacobians(*self._split(x, tau), out=out)
-
-    def _assemble_outputs(self, outputs, x, out=None):
-        """``(x⁺, A, B)`` from the derivatives kernel's buffers (``outputs``, just written) at ``x``."""
-        return self._assemble(x) if out is None else self._assemble(x, out)
 
     def unchecked_jacobians(self, x: np.ndarray, tau: np.ndarray, *,
                             out=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
