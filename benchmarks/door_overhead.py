@@ -156,10 +156,14 @@ def tree_doors(rows: int):
     jac = st.jacobians(x, tau)
     jbuf = tuple(np.empty(np.shape(o)) for o in jac)
     assembly = joint_step._COMPILED[(n, os.environ.get("NCGEN_CFLAGS"))]
-    aba_k, der_k = alone(door(model, "aba").kernel), alone(st._derivatives)
+    aba_k, der_k = alone(st._aba), alone(st._derivatives)
+
+    def call_alone(calls, rounds):
+        st._aba(q, v, tau)                           # the kernel's inputs: this state
+        return aba_k(calls, rounds)
 
     def jac_alone(calls, rounds):
-        st.jacobians(x, tau)                         # the assembly's inputs: this state's derivatives
+        st._derivatives(q, v, tau)                   # the kernel's inputs: this state
         d, s = der_k(calls, rounds), kernel_ns(assembly, calls, rounds)
         return d[0] + s[0], d[1] + s[1]
 
@@ -167,8 +171,8 @@ def tree_doors(rows: int):
     for i, o in enumerate(st._derivatives.direct.outputs[:4]):
         assembly.inputs[1 + i][:] = o
     assembly.inputs[5][:] = x
-    out += [("JointStep call", lambda: st(x, tau), aba_k, 1),
-            ("JointStep call, out=", lambda b=np.empty(2 * n): st(x, tau, out=b), aba_k, 1),
+    out += [("JointStep call", lambda: st(x, tau), call_alone, 1),
+            ("JointStep call, out=", lambda b=np.empty(2 * n): st(x, tau, out=b), call_alone, 1),
             ("JointStep.jacobians", lambda: st.jacobians(x, tau), jac_alone, 1),
             ("JointStep.jacobians, out=", lambda: st.jacobians(x, tau, out=jbuf), jac_alone, 1)]
     return out
@@ -181,8 +185,9 @@ def chain_doors():
 
     model = nc.System.from_toml(HERE.parent / "examples" / "chain.toml").build()
     q, v = np.array(model.q0, dtype=float), np.array(model.v0, dtype=float)
-    fd = forward_dynamics_kernel(model)
     a, lam = nc.forward_dynamics(model, q, v, backend="compiled")
+    fd = model.data.forward_dynamics_door.kernel if model.data.forward_dynamics_door else forward_dynamics_kernel(model)
+    fd.inputs[1][:], fd.inputs[2][:] = q, v                     # the door's kernel at this state
     fd_buf = (np.empty_like(a), np.empty_like(lam))
     fd_k = lambda calls, rounds: kernel_ns(fd, calls, rounds)    # noqa: E731
     st = nc.step_function(model, 0.01)

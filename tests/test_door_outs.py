@@ -220,7 +220,7 @@ def test_joint_step_call_and_jacobians_doors_write_out(two_link, monkeypatch):
         st.jacobians(x, np.array([1.0, np.inf]))
     with pytest.raises(ShapeError, match=r"^x \(joint positions and rates"):
         st(x[:-1], tau)
-    if st._straight_call and st._straight_jacobians:    # a good call is the C callers alone
+    if st._straight_call is not None and st._straight_jacobians is not None:    # the C callers alone
         monkeypatch.setattr(st, "unchecked", lambda *a, **k: pytest.fail("checked path taken"))
         monkeypatch.setattr(st, "unchecked_jacobians", lambda *a, **k: pytest.fail("checked path taken"))
         assert np.array_equal(st(list(x), tau), x1) and np.array_equal(st.jacobians(x, tau, out=outs)[2], J[2])

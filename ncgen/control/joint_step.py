@@ -30,6 +30,7 @@ whose every rate is independent (no mimic joint) take it; others are refused by 
 """
 from __future__ import annotations
 
+import ctypes
 import functools
 import os
 
@@ -39,7 +40,8 @@ import numpy as np
 from ncgen.control.step import StepFunction
 from ncgen.errors import CompilerNotFound, NcgenError
 from ncgen.runtime.tree_algorithm_kernels import KERNELS, AlgorithmKernel, aba, aba_derivatives, buffers, kernel_of
-from ncgen.validation import as_vector, positive, write_out
+from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL
+from ncgen.validation import MAX_MAGNITUDE, as_vector, positive, write_out
 
 
 def joint_step_refusal(model) -> str | None:
@@ -107,9 +109,38 @@ def compiled_step(n: int, h: float):
     return fast_caller(direct, 2, first=1, outputs=[(direct.outputs[0], 2 * n, 0)])
 
 
-def compiled_assembly(kernel, n: int, h: float):
+def joined_caller(model, k, p):
+    """``call(x, tau)``: the flat kernel ``k`` (ABA or its derivatives) of ``model`` at
+    ``x = [q; v]`` (one buffer of 2n values whose halves are the kernel's ``qj`` and ``vj``: no
+    slicing in Python), ``t = 0`` and the parameters ``p`` (None: the model's), on buffers of
+    its own (:meth:`~ncgen.codegen.direct.DirectFunction.copy`), every value checked in C
+    (finite, magnitude at most :data:`~ncgen.validation.MAX_MAGNITUDE`) and the pivot check
+    too: returns the output buffers (None when the check fails, a TypeError or ValueError for
+    what it refuses), with them: ``(call, outputs)``; None for a kernel on the tree tables,
+    with quaternions, or without the extension."""
+    from ncgen.codegen.fast_call import fast_caller
+    from ncgen.runtime.tree_library import _Direct
+
+    if not isinstance(k, AlgorithmKernel) or k._fast is None or k._quaternions:
+        return None
+    d, n = k.direct.copy(), model.joint_space.nv
+    d.inputs[-1][...] = model.p0 if p is None else as_vector(p, model.np, "p")
+    x = np.zeros(2 * n)
+    arg = (ctypes.c_void_p * len(d._arg))(*(ctypes.cast(a, ctypes.c_void_p).value for a in d._arg))
+    arg[1], arg[2] = x.ctypes.data, x.ctypes.data + 8 * n              # qj, vj: the halves of x
+    names = ALGORITHMS[k.name][1]
+    outs = d.outputs[:len(names)]
+    check = d.outputs[-1] if d.function.n_out() > len(names) else None
+    shim = _Direct([d.inputs[0], x, d.inputs[3]], d._fn, (ctypes.addressof(arg), *d._args[1:]), (d, arg, x))
+    call = fast_caller(shim, 2, first=1, check=check, tol=PIVOT_TOL, bound=MAX_MAGNITUDE,
+                       result=outs[0] if len(outs) == 1 else tuple(outs))
+    return None if call is None else (call, outs)
+
+
+def compiled_assembly(kernel, n: int, h: float, buffers=None):
     """``assemble(x)`` or ``assemble(x, out)``: ``(x⁺, A, B)`` from the output buffers of the
-    flat ABA-derivatives ``kernel`` (just called at ``x``) in one C call, fresh arrays or
+    flat ABA-derivatives ``kernel`` (just called at ``x``; ``buffers``: other buffers of its
+    four outputs, those of a :func:`joined_caller`) in one C call, fresh arrays or
     written into ``out`` (a ValueError for a bad ``out``); None for a kernel on the tree tables,
     without a C compiler or without the extension."""
     from ncgen.codegen.direct import compile_direct
@@ -129,7 +160,8 @@ def compiled_assembly(kernel, n: int, h: float):
     direct.inputs[0][0] = h
     x1, A, B = direct.outputs
     fast = fast_caller(direct, 5, first=1, outputs=[(x1, 2 * n, 0), (A, 2 * n, 2 * n), (B, 2 * n, n)])
-    return None if fast is None else functools.partial(fast, *kernel.direct.outputs[:4])
+    return None if fast is None else functools.partial(fast, *(kernel.direct.outputs[:4] if buffers is None
+                                                               else buffers))
 
 
 class JointStep:
@@ -159,34 +191,13 @@ class JointStep:
         self._function = None if self._assemble is not None else step_jacobians_function(n)
         self._aba = kernel_of(model, "aba", kernels)
         self._step = compiled_step(n, h)
-        #: Whether a call and :meth:`jacobians` go straight to the C callers (flat kernels with the
-        #: model's parameters, the compiled formulas): see :meth:`_straight`.
-        self._straight_call = self._step is not None and self._takes(self._aba)
-        self._straight_jacobians = self._assemble is not None and self._takes(self._derivatives)
-
-    def _takes(self, k) -> bool:
-        """Whether the kernel ``k`` can be called straight (:meth:`_straight`)."""
-        return isinstance(k, AlgorithmKernel) and k._fast is not None and self.p is None and not k._quaternions
-
-    def _straight(self, jacobians: bool, x, tau, out):
-        """ABA (or with ``jacobians`` its derivatives; flat kernels, at ``t = 0`` and the model's
-        parameters) at ``x = [q; v]``, ``tau`` and ``x⁺`` (and ``A``, ``B``) from its outputs in C,
-        fresh or into ``out``, every check in C (lengths, kinds, finite values of magnitude at
-        most :data:`~ncgen.validation.MAX_MAGNITUDE`, ``out``); None for the checked path,
-        whose error names what is wrong."""
-        k = self._derivatives if jacobians else self._aba
-        if not (k._t == 0.0 and k._default_p):
-            k._at(0.0, None)
-        n = self.n
-        try:
-            outputs = k._fast(x[:n], x[n:], tau)
-            if outputs is None:
-                return None
-            if jacobians:                   # the assembly reads the kernel's buffers itself
-                return self._assemble(x) if out is None else self._assemble(x, out)
-            return self._step(outputs, x) if out is None else self._step(outputs, x, out)
-        except (TypeError, ValueError, OverflowError, KeyError, IndexError):
-            return None
+        # a call and jacobians straight to C (flat kernels and the compiled formulas): ABA (its
+        # derivatives) on x whole through a joined caller, then the formulas on its buffers
+        joined = joined_caller(model, self._aba, p) if self._step is not None else None
+        self._straight_call = None if joined is None else joined[0]
+        joined = joined_caller(model, self._derivatives, p) if self._assemble is not None else None
+        self._straight_jacobians = None if joined is None else (
+            joined[0], compiled_assembly(self._derivatives, n, h, joined[1]))
 
     def _split(self, x, tau):
         """``x, tau`` as finite float vectors of the right sizes, else the error naming the
@@ -202,10 +213,14 @@ class JointStep:
     def __call__(self, x, tau, p=None, t=None, *, out=None) -> np.ndarray:
         """``x⁺`` (``t``, s, is ignored: the step is time-invariant); ``out``: a writable
         C-contiguous float64 array of ``2n`` values, written and returned."""
-        if self._straight_call and p is None:
-            x1 = self._straight(False, x, tau, out)
-            if x1 is not None:
-                return x1
+        aba = self._straight_call
+        if aba is not None and p is None:       # every check in C; whatever it refuses: the checked path
+            try:
+                a = aba(x, tau)
+                if a is not None:
+                    return self._step(a, x) if out is None else self._step(a, x, out)
+            except (TypeError, ValueError, OverflowError):
+                pass
         self._same(p, "__call__")
         return self.unchecked(*self._split(x, tau), out=out)
 
@@ -248,10 +263,13 @@ class JointStep:
         """``(x⁺, A = ∂x⁺/∂x, B = ∂x⁺/∂τ)`` at ``(x, τ)`` (``t`` ignored); ``out``: a tuple of
         three writable C-contiguous float64 arrays of shapes ``(2n,)``, ``(2n, 2n)``, ``(2n, n)``,
         written and returned."""
-        if self._straight_jacobians and p is None:
-            result = self._straight(True, x, tau, out)
-            if result is not None:
-                return result
+        straight = self._straight_jacobians
+        if straight is not None and p is None:  # every check in C; whatever it refuses: the checked path
+            try:
+                if straight[0](x, tau) is not None:
+                    return straight[1](x) if out is None else straight[1](x, out)
+            except (TypeError, ValueError, OverflowError):
+                pass
         self._same(p, "jacobians")
         return self.unchecked_jacobians(*self._split(x, tau), out=out)
 
