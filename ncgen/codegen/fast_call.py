@@ -7,7 +7,8 @@ sequences element by element; ``bytes``, ``bytearray`` and byte memoryviews refu
 read as numbers), calls the kernel's C entry point with the work arrays of a
 :class:`~ncgen.codegen.direct.DirectFunction` and returns the object given at construction
 (its output buffers), or None when an optional check fails: ``check[0] > tol`` and
-``check[1]`` finite (the tree kernels' pivot and sum).  ``caller.batch(n, outs, *arrays)``
+``check[1]`` finite (the tree kernels' pivot and sum), or (``finite``) a door's outputs not
+all finite (a KKT solve's).  ``caller.batch(n, outs, *arrays)``
 calls it on ``n`` rows of C-contiguous float64 arrays in one C loop (a door's quaternions
 normalised row by row), writing the first
 ``len(outs)`` outputs to the rows of ``outs`` (the first row whose check fails returned, or

@@ -1,4 +1,4 @@
-"""Compiled rigid-body algorithms of trees, called from Python with 1–3 µs overhead: RNEA,
+"""Compiled rigid-body algorithms of trees, called from Python with about 1 µs overhead: RNEA,
 CRBA, ABA and the derivatives of RNEA and ABA (SX functions of
 :mod:`ncgen.assembly.tree_algorithms`, one small C library each, compiled on first use and
 cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFunction`).
@@ -8,8 +8,8 @@ cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFu
 * :func:`aba_derivatives` — ``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)``;
 * every one takes ``out=``: an array (a tuple of arrays for the derivatives) of the outputs'
   shapes, float64 and C-contiguous, written in place and returned (no allocation); a call with
-  the last call's time and parameters is one C call (:class:`Door`: 1–3 µs beside the kernel
-  alone on a loaded 2-core machine, benchmarks/call_overhead.py ``--alone``);
+  the last call's time and parameters is one C call (:class:`Door`: 0.5–1.5 µs beside the
+  kernel alone on a loaded 2-core machine, benchmarks/door_overhead.py);
 * :func:`algorithm_kernel` — the compiled kernel itself (:class:`AlgorithmKernel`), for loops
   (``nc.linearize(model, qj, vj, u, space="joint")`` uses the ABA derivatives:
   :mod:`ncgen.analysis.joint_linearization`).
