@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import ncgen as nc
-from ncgen.errors import NcgenError, ShapeError
+from ncgen.errors import ModelError, NcgenError, ShapeError
 from ncgen.runtime import dynamics_at_state
 from ncgen.runtime.dynamics_at_state import forward_dynamics_kernel
 
@@ -116,6 +116,11 @@ def test_forward_dynamics_refuses_a_bad_out_or_argument_by_name(chain):
         nc.forward_dynamics(chain, q, v[:-1], backend="compiled")
     with pytest.raises(ShapeError, match="^t"):
         nc.forward_dynamics(chain, q, v, t=float("nan"), backend="compiled")
+    door = chain.data.forward_dynamics_door
+    if door:                                 # q = 0: every bar of zero length, the KKT matrix singular
+        assert door.call(np.zeros(chain.nq), v, door.zero_u) is None          # its NaN found in C
+    with pytest.raises(ModelError, match="KKT matrix .* is singular at this state"):
+        nc.forward_dynamics(chain, np.zeros(chain.nq), v, backend="compiled")
     a2, lam2 = nc.forward_dynamics(chain, q, v, backend="compiled")       # the door still works after them
     assert np.array_equal(a2, a) and np.array_equal(lam2, lam)
 

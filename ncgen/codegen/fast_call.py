@@ -7,8 +7,8 @@ sequences element by element; ``bytes``, ``bytearray`` and byte memoryviews refu
 read as numbers), calls the kernel's C entry point with the work arrays of a
 :class:`~ncgen.codegen.direct.DirectFunction` and returns the object given at construction
 (its output buffers), or None when an optional check fails: ``check[0] > tol`` and
-``check[1]`` finite (the tree kernels' pivot and sum), or (``finite``) a door's outputs not
-all finite (a KKT solve's).  ``caller.batch(n, outs, *arrays)``
+``check[1]`` finite (the tree kernels' pivot and sum), or (``check="finite"``) a door's
+outputs not all finite (a KKT solve's).  ``caller.batch(n, outs, *arrays)``
 calls it on ``n`` rows of C-contiguous float64 arrays in one C loop (a door's quaternions
 normalised row by row), writing the first
 ``len(outs)`` outputs to the rows of ``outs`` (the first row whose check fails returned, or
@@ -451,7 +451,7 @@ def _module():
 
 
 def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 0.0, result=None,
-                bound: float = 0.0, outputs=None, quaternions=(), finite: bool = False):
+                bound: float = 0.0, outputs=None, quaternions=()):
     """``caller(*arrays)`` for the inputs ``first .. first + n_inputs − 1`` of the
     :class:`~ncgen.codegen.direct.DirectFunction` ``direct`` (module docstring; ``check``: a
     2-entry output buffer, ``result``: what a call returns, ``bound``: the largest magnitude of
@@ -464,7 +464,7 @@ def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 
     writable, the outputs' shapes, else a ValueError), writes them into it and returns it.
     ``quaternions``: offsets of ``[qx, qy, qz, qw]`` in the first input, normalised after the
     copy with ``qw ≥ 0`` (as :func:`~ncgen.codegen.tree_check.unit_quaternions`; a zero one a
-    ValueError).  ``finite``: a door returns None when a value of its outputs is not finite
+    ValueError).  ``check="finite"`` (a door's): None when a value of its outputs is not finite
     (the check of kernels without a check output, e.g. a KKT solve's)."""
     mod = _module()
     if mod is None:
@@ -474,6 +474,8 @@ def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 
     import ctypes
     address = ctypes.cast(fn, ctypes.c_void_p).value
     outs = [(b.ctypes.data, int(r), int(c)) for b, r, c in (outputs or ())]
+    finite = isinstance(check, str) and check == "finite"
+    check = None if finite else check
     return mod.Caller(address, arg, res, iw, w, mem, [b.ctypes.data for b in bufs], [b.size for b in bufs],
                       0 if check is None else check.ctypes.data, float(tol), float(bound), result,
                       (direct, bufs, check, outputs), outs, [int(i) for i in quaternions], bool(finite))

@@ -91,7 +91,7 @@ def forward_dynamics_door(model):
         k = forward_dynamics_kernel(model).copy()
         f = k.function
         dense = all(f.sparsity_out(i).is_dense() and f.size2_out(i) == 1 for i in range(2))
-        call = dense and fast_caller(k, 3, first=1, bound=MAX_MAGNITUDE, finite=True,
+        call = dense and fast_caller(k, 3, first=1, bound=MAX_MAGNITUDE, check="finite",
                                      outputs=[(k.outputs[0], f.size1_out(0), 0), (k.outputs[1], f.size1_out(1), 0)])
         data.forward_dynamics_door = ForwardDynamicsDoor(model, call, k) if call else False
     return data.forward_dynamics_door
