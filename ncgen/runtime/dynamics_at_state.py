@@ -189,7 +189,7 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     except AttributeError:                  # not a model: model_data names what it is
         gives = model_data(model).rnea_efforts.get(joints)
     if gives or _rnea_gives(model, joints):
-        return through(model, "rnea", "auto", (qj, vj, aj), p, t, out)
+        return through(model, "rnea", "auto", qj, vj, aj, p, t, out)
     t = float(t)
     js = model.joint_space
     p = model.p0 if p is None else as_vector(p, model.np, "p")

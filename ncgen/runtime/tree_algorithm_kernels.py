@@ -513,11 +513,11 @@ def _checked(model, k: AlgorithmKernel, args: tuple) -> list:
 def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``τ``: the efforts of the independent joint rates giving accelerations ``aj`` at
     ``(qj, vj)`` (module docstring; Pinocchio's ``rnea``)."""
-    return through(model, "rnea", kernels, (qj, vj, aj), p, t, out)
+    return through(model, "rnea", kernels, qj, vj, aj, p, t, out)
 
 
-def through(model, name: str, kernels: str, args: tuple, p, t: float, out):
-    """``door(model, name, kernels)(args, p, t, out)``, the door found as :func:`door`
+def through(model, name: str, kernels: str, x, y, z, p, t: float, out):
+    """``door(model, name, kernels)((x, y, z), p, t, out)``, the door found as :func:`door`
     finds it (inline: one Python frame less) and its C caller called straight when it takes
     any time (``Door.free``) and ``p`` is None; whatever that refuses, and a singular or
     non-finite result, takes the door (whose checked path names the argument, or raises the
@@ -531,32 +531,41 @@ def through(model, name: str, kernels: str, args: tuple, p, t: float, out):
     free = d.free
     if free is not None and p is None:
         try:
-            result = free(*args, out)
+            result = free(x, y, z, out)
             if result is not None:
                 return result
         except (TypeError, ValueError, OverflowError, RuntimeError):
             pass
-    return d(args, p, t, out)
+    return d((x, y, z), p, t, out)
 
 
 def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``M``: the joint-space mass matrix of the independent rates (Pinocchio's ``crba``, both triangles)."""
-    return through(model, "crba", kernels, (qj,), p, t, out)
+    d = door(model, "crba", kernels)
+    free = d.free
+    if free is not None and p is None:      # as through does (one argument)
+        try:
+            result = free(qj, out)
+            if result is not None:
+                return result
+        except (TypeError, ValueError, OverflowError, RuntimeError):
+            pass
+    return d((qj,), p, t, out)
 
 
 def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``aj``: joint accelerations under the efforts ``tau`` of the independent rates (Pinocchio's ``aba``)."""
-    return through(model, "aba", kernels, (qj, vj, tau), p, t, out)
+    return through(model, "aba", kernels, qj, vj, tau, p, t, out)
 
 
 def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto",
                      out=None) -> tuple[np.ndarray, ...]:
     """``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)`` (Pinocchio's ``computeRNEADerivatives``; ∂τ/∂a = M)."""
-    return through(model, "rnea_derivatives", kernels, (qj, vj, aj), p, t, out)
+    return through(model, "rnea_derivatives", kernels, qj, vj, aj, p, t, out)
 
 
 def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto",
                     out=None) -> tuple[np.ndarray, ...]:
     """``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)`` (Pinocchio's ``computeABADerivatives``; ∂a/∂τ = M⁻¹;
     rows per independent rate)."""
-    return through(model, "aba_derivatives", kernels, (qj, vj, tau), p, t, out)
+    return through(model, "aba_derivatives", kernels, qj, vj, tau, p, t, out)
