@@ -4,9 +4,13 @@ module dictionary keyed by the model did): ``nc.aba``, ``nc.rnea``, ``nc.inverse
 and ``nc.joint_forward_dynamics`` at one state, counted by valgrind's callgrind (deterministic,
 unaffected by the load): 200 uncounted calls, then the instrumentation switched on
 (``callgrind_control -i on``) for ``--calls`` calls.  Printed per door: instructions per call
-for this tree and ``--before DIR``, with ``RATIO`` lines (target ≤ 1.02).
+for this tree and ``--before DIR``, with ``RATIO`` lines (target ≤ 1.02).  ``--all``: issue
+37's other doors too (fresh outputs): ``nc.crba``, ``nc.rnea_derivatives``,
+``nc.aba_derivatives``, ``nc.JointStep`` called and ``.jacobians`` on the UR10,
+``nc.forward_dynamics(..., backend="compiled")`` and ``nc.step_function`` called and
+``.jacobians`` on examples/chain.toml (the load-free complement of door_overhead.py).
 
-    python benchmarks/door_callgrind.py [--before DIR] [--calls 2000] [--smoke]
+    python benchmarks/door_callgrind.py [--before DIR] [--calls 2000] [--all] [--smoke]
 """
 from __future__ import annotations
 
@@ -32,9 +36,21 @@ model = nc.System.from_urdf(next(f.locate() for f in md.files("example-robot-dat
 n = model.joint_space.nv
 q, v, w = np.linspace(-0.8, 0.9, n), np.linspace(0.3, -0.2, n), np.linspace(-1.0, 1.0, n)
 door, calls = sys.argv[1], int(sys.argv[2])
-call = {"aba": lambda: nc.aba(model, q, v, w), "rnea": lambda: nc.rnea(model, q, v, w),
-        "inverse_dynamics": lambda: nc.inverse_dynamics(model, q, v, w),
-        "joint_forward_dynamics": lambda: nc.joint_forward_dynamics(model, q, v, w)}[door]
+calls_of = {"aba": lambda: nc.aba(model, q, v, w), "rnea": lambda: nc.rnea(model, q, v, w),
+            "inverse_dynamics": lambda: nc.inverse_dynamics(model, q, v, w),
+            "joint_forward_dynamics": lambda: nc.joint_forward_dynamics(model, q, v, w),
+            "crba": lambda: nc.crba(model, q), "rnea_derivatives": lambda: nc.rnea_derivatives(model, q, v, w),
+            "aba_derivatives": lambda: nc.aba_derivatives(model, q, v, w)}
+if door.startswith("JointStep"):
+    st, x = nc.JointStep(model, 0.01), np.concatenate([q, v])
+    calls_of |= {"JointStep call": lambda: st(x, w), "JointStep.jacobians": lambda: st.jacobians(x, w)}
+elif door not in calls_of:
+    chain = nc.System.from_toml(os.path.join("examples", "chain.toml")).build()
+    sf, qc, vc = nc.step_function(chain, 0.01), chain.q0, chain.v0
+    xc, none = np.concatenate([qc, vc]), np.zeros(0)
+    calls_of |= {"forward_dynamics compiled": lambda: nc.forward_dynamics(chain, qc, vc, backend="compiled"),
+                 "StepFunction call": lambda: sf(xc, none), "StepFunction.jacobians": lambda: sf.jacobians(xc, none)}
+call = calls_of[door]
 for _ in range(200):
     call()
 switch = lambda on: subprocess.run(["callgrind_control", "-i", on, str(os.getpid())], check=True, capture_output=True)
@@ -44,6 +60,9 @@ for _ in range(calls):
 switch("off")
 """
 DOORS = ("aba", "rnea", "inverse_dynamics", "joint_forward_dynamics")
+#: ``--all``: issue 37's other doors.
+MORE = ("crba", "rnea_derivatives", "aba_derivatives", "JointStep call", "JointStep.jacobians",
+        "forward_dynamics compiled", "StepFunction call", "StepFunction.jacobians")
 
 
 def counted(tree: Path, door: str, calls: int) -> float:
@@ -58,6 +77,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--before", type=Path, help="another ncgen tree to compare with (its root directory)")
     ap.add_argument("--calls", type=int, default=2000)
+    ap.add_argument("--all", action="store_true", help="issue 37's other doors too (module docstring)")
     ap.add_argument("--smoke", action="store_true", help="2 calls (CI)")
     a = ap.parse_args(argv)
     print(machine())
@@ -66,8 +86,9 @@ def main(argv=None) -> None:
         return
     calls = 2 if a.smoke else a.calls
     trees = {"this tree": ROOT} | ({"before": a.before.resolve()} if a.before else {})
-    print(f"\n=== ur10: one call of each door at one state, {calls} calls counted")
-    for door in DOORS:
+    print(f"\n=== ur10: one call of each door at one state, {calls} calls counted"
+          + (" (forward_dynamics and StepFunction: examples/chain.toml)" if a.all else ""))
+    for door in DOORS + (MORE if a.all else ()):
         got = {name: counted(tree, door, calls) for name, tree in trees.items()}
         print(f"  {door}: " + ", ".join(f"{name} {c:,.0f}" for name, c in got.items()) + " instructions per call")
         if a.before:

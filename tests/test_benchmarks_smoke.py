@@ -75,6 +75,10 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                              "RATIO ncgen / MuJoCo RK4, simulate only, DOPRI5", "agrees with Pinocchio"]),
     ("simulate_start_callgrind.py", ["=== panda: nc.simulate of one 1 ms output step from a new start",
                                      re.compile(r"this tree: +[\d,]+ instructions per call, start check")]),
+    ("door_overhead.py", ["=== doors against their kernels alone in a C loop", re.compile(r"nc\.rnea +[\d.]+ "),
+                          "nc.aba_derivatives, 4 rows, out=", "JointStep.jacobians, out=",
+                          "nc.forward_dynamics compiled, out=", "StepFunction.jacobians, out=", "OVERHEAD",
+                          "load average at the end"]),
     ("door_callgrind.py", ["=== ur10: one call of each door at one state",
                            re.compile(r"joint_forward_dynamics: this tree [\d,]+ instructions per call")]),
     ("simulate_fixed_cost.py --model balls", ["=== balls (4 bodies on spherical joints): nc.simulate of one 1 ms "
@@ -120,7 +124,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                              "load average at the end"]),
 ])
 def test_smoke(script, expected):
-    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py", "load_time.py", "call_overhead.py"):
+    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py", "load_time.py", "call_overhead.py",
+                  "door_overhead.py"):
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
     if script in ("step_jacobians.py", "joint_mpc.py", "joint_step_jacobians.py", "joint_ilqr_reach.py"):

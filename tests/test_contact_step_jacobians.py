@@ -91,6 +91,26 @@ def test_the_step_s_factorisations_run_on_one_blas_thread(block, monkeypatch):
     assert set(after.values()) == {2}, after
 
 
+def test_out_is_written_and_a_bad_out_is_named(block):
+    """``out=`` of a call and of ``jacobians`` receives the fresh result bit for bit; a wrong
+    ``out`` (shape, dtype, non-contiguous) is refused by name."""
+    from ncgen.errors import ShapeError
+
+    _, st = block
+    x, u = np.array([0, 0, 0.5, 0]), np.array([20.0])
+    x1, A, B = st.jacobians(x, u)
+    out = np.full(4, np.nan)
+    assert st(x, u, out=out) is out and np.array_equal(out, x1)
+    outs = (np.empty(4), np.empty((4, 4)), np.empty((4, 1)))
+    assert st.jacobians(x, u, out=outs) is outs
+    assert all(np.array_equal(o, r) for o, r in zip(outs, (x1, A, B)))
+    for bad in (np.empty(5), np.empty(4, dtype=np.float32), np.empty(8)[::2]):
+        with pytest.raises(ShapeError, match="ContactStepFunction: out"):
+            st(x, u, out=bad)
+        with pytest.raises(ShapeError, match="ContactStepFunction.jacobians: out"):
+            st.jacobians(x, u, out=(bad, outs[1], outs[2]))
+
+
 def test_block_sliding_hard_push(block):
     _, st = block
     u = 20.0

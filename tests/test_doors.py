@@ -209,8 +209,9 @@ def test_a_bad_out_is_named(tree, kind):
     out = make(ref)
     before = np.array(out, dtype=float, copy=True)
     for f in (lambda: nc.rnea(tree, *x[:3], out=out), lambda: nc.inverse_dynamics(tree, *x[:3], joints="all", out=out),
-              lambda: nc.aba(tree, x[0], x[1], x[3], out=out)):
-        with pytest.raises(ShapeError, match=r"(rnea|inverse_dynamics|aba): out: expected a writable C-contiguous "
+              lambda: nc.aba(tree, x[0], x[1], x[3], out=out), lambda: nc.joint_forward_dynamics(tree, x[0], x[1], out=out)):
+        with pytest.raises(ShapeError, match=r"(rnea|inverse_dynamics|aba|joint_forward_dynamics): out: expected a "
+                                             r"writable C-contiguous "
                                              r"float64 array of shape \(9,\), " + ".*" + found):
             f()
     np.testing.assert_array_equal(np.asarray(out, dtype=float), before)            # nothing written
@@ -219,6 +220,32 @@ def test_a_bad_out_is_named(tree, kind):
     with pytest.raises(ShapeError, match=r"rnea_derivatives: out: .* of shape \(9, 9\), got float64 array of shape "
                                          r"\(9,\)"):
         nc.rnea_derivatives(tree, *x[:3], out=tuple(np.zeros(9) for _ in range(4)))
+
+
+BAD_MATRIX_OUTS = {
+    "float32": (lambda r: r.astype(np.float32), r"got float32 array"),
+    "shape": (lambda r: np.zeros((9, 10)), r"got float64 array of shape \(9, 10\)"),
+    "transposed": (lambda r: np.zeros((9, 9)).T, r"not C-contiguous"),
+    "strided": (lambda r: np.zeros((18, 9))[::2], r"not C-contiguous"),
+    "a vector": (lambda r: np.zeros(81), r"got float64 array of shape \(81,\)"),
+}
+
+
+@pytest.mark.parametrize("kind", list(BAD_MATRIX_OUTS))
+def test_a_bad_matrix_out_is_named(tree, kind):
+    """CRBA's ``out`` and a matrix of the derivatives' ``out`` refused by name, nothing written."""
+    x = state(tree, 4)
+    make, found = BAD_MATRIX_OUTS[kind]
+    M = nc.crba(tree, x[0])
+    out = make(M)
+    before = out.copy()
+    with pytest.raises(ShapeError, match=r"crba: out: expected a writable C-contiguous float64 array of shape "
+                                         r"\(9, 9\), .*" + found):
+        nc.crba(tree, x[0], out=out)
+    outs = (np.zeros(9), np.zeros((9, 9)), out, np.zeros((9, 9)))
+    with pytest.raises(ShapeError, match=r"aba_derivatives: out: .* of shape \(9, 9\), .*" + found):
+        nc.aba_derivatives(tree, x[0], x[1], x[3], out=outs)
+    np.testing.assert_array_equal(out, before)
 
 
 def test_bad_arguments_are_named_at_the_door(tree):
@@ -258,11 +285,14 @@ def test_a_good_call_takes_the_c_door_only(tree, monkeypatch):
         CALLS[name](tree, x)
         CALLS[name](tree, [list(v) for v in x])                                  # lists of floats too
     with pytest.raises(AssertionError, match="checked path"):
-        nc.crba(tree, x[0], t=1.0)                                               # a new time: the checked path
-    with pytest.raises(AssertionError, match="checked path"):
         nc.aba(tree, x[0], x[1], x[3], p=tree.p0)                                # parameters given: the checked path
+    with pytest.raises(AssertionError, match="checked path"):
+        nc.crba(tree, x[0], p=tree.p0)
     nc.rnea(tree, *x[:3], t=1.0)                        # the tables' RNEA depends on no time: the C door still
-    nc.aba(tree, x[0], x[1], x[3], t=1.0)               # nor does this tree's ABA
+    nc.aba(tree, x[0], x[1], x[3], t=1.0)               # nor does this tree's ABA, CRBA or derivatives
+    nc.crba(tree, x[0], t=1.0)
+    nc.rnea_derivatives(tree, *x[:3], t=1.0)
+    nc.aba_derivatives(tree, x[0], x[1], x[3], t=2.0)
 
 
 def _recorded_flags(kernel) -> list[str]:

@@ -7,7 +7,8 @@ sequences element by element; ``bytes``, ``bytearray`` and byte memoryviews refu
 read as numbers), calls the kernel's C entry point with the work arrays of a
 :class:`~ncgen.codegen.direct.DirectFunction` and returns the object given at construction
 (its output buffers), or None when an optional check fails: ``check[0] > tol`` and
-``check[1]`` finite (the tree kernels' pivot and sum).  ``caller.batch(n, outs, *arrays)``
+``check[1]`` finite (the tree kernels' pivot and sum), or (``check="finite"``) a door's
+outputs not all finite (a KKT solve's).  ``caller.batch(n, outs, *arrays)``
 calls it on ``n`` rows of C-contiguous float64 arrays in one C loop (a door's quaternions
 normalised row by row), writing the first
 ``len(outs)`` outputs to the rows of ``outs`` (the first row whose check fails returned, or
@@ -61,6 +62,7 @@ typedef struct {
     Py_ssize_t rows[MAX_IN], cols[MAX_IN];      /* cols 0: a vector of rows values */
     int n_quat;
     Py_ssize_t quat[MAX_QUAT];                  /* offsets of [qx, qy, qz, qw] in the first input */
+    int finite;                                 /* 1: a door's outputs must be finite (else None) */
 } Caller;
 
 static int raw_bytes(PyObject *x) {
@@ -145,6 +147,17 @@ static int unit_quaternions(Caller *self) {
     return 0;
 }
 
+/* Whether every value of a door's outputs is finite (no early exit: the sum vectorises). */
+static int outputs_finite(const Caller *self) {
+    for (int j = 0; j < self->n_out; j++) {
+        Py_ssize_t m = self->rows[j] * (self->cols[j] ? self->cols[j] : 1);
+        double sum = 0.0;
+        for (Py_ssize_t i = 0; i < m; i++) sum += self->obuf[j][i] * 0.0;
+        if (sum != 0.0) return 0;
+    }
+    return 1;
+}
+
 /* Output j as row-major values (matrices are stored column-major by the kernels). */
 static void write_output(const Caller *self, int j, double *dst) {
     Py_ssize_t r = self->rows[j], c = self->cols[j];
@@ -222,6 +235,7 @@ static PyObject *caller_call(PyObject *self_, PyObject *const *args, size_t narg
         return NULL;
     }
     if (self->check && !(self->check[0] > self->tol && isfinite(self->check[1]))) Py_RETURN_NONE;
+    if (self->finite && !outputs_finite(self)) Py_RETURN_NONE;
     if (self->n_out) return outputs(self, out);
     Py_INCREF(self->result);
     return self->result;
@@ -313,9 +327,10 @@ static PyMethodDef caller_methods[] = {
 static PyObject *caller_new(PyTypeObject *type, PyObject *a, PyObject *kw) {
     unsigned long long fn, arg, res, iw, w, check; int mem; double tol, bound;
     (void)kw;
+    int finite = 0;
     PyObject *bufs, *sizes, *result, *keep, *outs = NULL, *quats = NULL;
-    if (!PyArg_ParseTuple(a, "KKKKKiOOKddOO|OO", &fn, &arg, &res, &iw, &w, &mem, &bufs, &sizes, &check, &tol, &bound,
-                          &result, &keep, &outs, &quats))
+    if (!PyArg_ParseTuple(a, "KKKKKiOOKddOO|OOp", &fn, &arg, &res, &iw, &w, &mem, &bufs, &sizes, &check, &tol, &bound,
+                          &result, &keep, &outs, &quats, &finite))
         return NULL;
     Py_ssize_t n = PySequence_Size(bufs);
     Py_ssize_t n_out = outs ? PySequence_Size(outs) : 0, n_quat = quats ? PySequence_Size(quats) : 0;
@@ -336,7 +351,7 @@ static PyObject *caller_new(PyTypeObject *type, PyObject *a, PyObject *kw) {
     }
     self->check = (const double *)(uintptr_t)check; self->tol = tol; self->bound = bound;
     Py_INCREF(result); self->result = result; Py_INCREF(keep); self->keep = keep;
-    self->n_out = (int)n_out; self->n_quat = (int)n_quat;
+    self->n_out = (int)n_out; self->n_quat = (int)n_quat; self->finite = finite && n_out;
     for (Py_ssize_t j = 0; j < n_out; j++) {
         unsigned long long address = 0;
         PyObject *o = PySequence_GetItem(outs, j);
@@ -449,7 +464,8 @@ def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 
     writable, the outputs' shapes, else a ValueError), writes them into it and returns it.
     ``quaternions``: offsets of ``[qx, qy, qz, qw]`` in the first input, normalised after the
     copy with ``qw ≥ 0`` (as :func:`~ncgen.codegen.tree_check.unit_quaternions`; a zero one a
-    ValueError)."""
+    ValueError).  ``check="finite"`` (a door's): None when a value of its outputs is not finite
+    (the check of kernels without a check output, e.g. a KKT solve's)."""
     mod = _module()
     if mod is None:
         return None
@@ -458,6 +474,8 @@ def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 
     import ctypes
     address = ctypes.cast(fn, ctypes.c_void_p).value
     outs = [(b.ctypes.data, int(r), int(c)) for b, r, c in (outputs or ())]
+    finite = isinstance(check, str) and check == "finite"
+    check = None if finite else check
     return mod.Caller(address, arg, res, iw, w, mem, [b.ctypes.data for b in bufs], [b.size for b in bufs],
                       0 if check is None else check.ctypes.data, float(tol), float(bound), result,
-                      (direct, bufs, check, outputs), outs, [int(i) for i in quaternions])
+                      (direct, bufs, check, outputs), outs, [int(i) for i in quaternions], bool(finite))

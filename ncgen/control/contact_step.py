@@ -57,7 +57,7 @@ from ncgen.blas_threads import one_blas_thread
 from ncgen.codegen.stepper_package import PENETRATION_TOL
 from ncgen.control.discrete import residual_scale
 from ncgen.errors import NcgenError
-from ncgen.validation import as_scalar
+from ncgen.validation import as_scalar, write_out
 
 #: Relative tolerance of the switching tests (module docstring).
 SWITCH_TOL = 1e-7
@@ -179,13 +179,18 @@ class ContactStepFunction:
         return U
 
     # ----------------------------------------------------------------------- step
-    def __call__(self, x, u=None, p=None, t=None) -> np.ndarray:
-        return self.step(x, u, p, t).x1
+    def __call__(self, x, u=None, p=None, t=None, *, out=None) -> np.ndarray:
+        """The state after one step (``out``: a writable C-contiguous float64 array of ``nx``
+        values, written and returned)."""
+        x1 = self.step(x, u, p, t).x1
+        return x1 if out is None else write_out(out, x1, "ContactStepFunction")
 
-    def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
-        """``(x1, A, B)`` (and ``C`` if ``parameters``) of one step (:meth:`step`)."""
+    def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False, out=None):
+        """``(x1, A, B)`` (and ``C`` if ``parameters``) of one step (:meth:`step`); ``out``: a
+        tuple of writable C-contiguous float64 arrays of those shapes, written and returned."""
         s = self.step(x, u, p, t)
-        return (s.x1, s.A, s.B, s.C) if parameters else (s.x1, s.A, s.B)
+        result = (s.x1, s.A, s.B, s.C) if parameters else (s.x1, s.A, s.B)
+        return result if out is None else write_out(out, result, "ContactStepFunction.jacobians")
 
     def rollout(self, x0, U, p=None, t0=None) -> np.ndarray:
         """States ``x₁ … x_N`` (N × nx) under the inputs ``U`` (N × nu)."""

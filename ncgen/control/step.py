@@ -29,6 +29,13 @@ through them; what they do not provide — the rollouts' adjoints (and the unkno
 the steps, which iLQR's second-order terms use) — compiles the flat package at its first
 use.  Both solve the same equations from the same start to the rounding floor: their steps
 and Jacobians agree to about 1e-12.
+
+A call and :meth:`StepFunction.jacobians` on the tables at the model's parameters are one C
+call each (:meth:`~ncgen.runtime.table_step.TableStep.door`: the arguments' lengths and
+finiteness, the step's convergence and finite results checked in C, fresh outputs or
+``out=`` written); whatever that refuses takes the checked path, whose error names the
+argument or says why the step failed.  Both take ``out=``: writable C-contiguous float64
+arrays of the outputs' shapes, written and returned.
 Not thread-safe: one object per thread.
 """
 from __future__ import annotations
@@ -43,7 +50,7 @@ from ncgen.control.step_support import (PACKAGE_OPTIONS, StepDidNotConverge, com
                                         compile_functions, state_vector)
 from ncgen.errors import NcgenError
 from ncgen.model.rolling import ROLLING_STEP, refuse_rolling
-from ncgen.validation import as_numbers, as_scalar
+from ncgen.validation import as_numbers, as_scalar, write_out
 
 METHODS = ("rattle",)
 #: The choices of ``kernels`` (module docstring).
@@ -149,8 +156,14 @@ class StepFunction:
         self._table = _table_step(model, h, kernels, abstol, max_iter)
         #: The kernels chosen: ``"tables"`` or ``"flat"`` (module docstring).
         self.kernels = "tables" if self._table is not None else "flat"
+        self._doors = None
         if self._table is None:
             self._load_flat()
+        else:                                   # the C doors of a call and of its Jacobians
+            self._doors = (self._table.door(False, self.residual_tol), self._table.door(True, self.residual_tol))
+            if None in self._doors:
+                self._doors = None
+        self._t0 = float(model.t0)
 
     @property
     def functions(self) -> dict:
@@ -220,17 +233,56 @@ class StepFunction:
         return x1, A, B
 
     # ---------------------------------------------------------------------- step
-    def __call__(self, x, u=None, p=None, t=None) -> np.ndarray:
-        """The state after one step."""
+    def _door(self, jacobians: bool, x, u, t, out):
+        """The step's C door (module docstring) at ``(x, u, t)``: its result, or None for the
+        checked path (a refused argument or ``out``, a step that did not converge)."""
+        door = self._doors[jacobians]
+        t = self._t0 if t is None else t
+        if type(t) is not float or t != door.t:
+            door.at(as_scalar(t, "t"))
+        if u is None:
+            u = _NO_INPUTS
+        try:
+            if self.nu or not jacobians:
+                return door.call(x, u, out)
+            if out is None:                     # no inputs: B is (nx, 0), not the door's
+                r = door.call(x, u)
+                return None if r is None else (*r, np.zeros((self.nx, 0)))
+            B = out[2] if type(out) is tuple and len(out) == 3 else None
+            if not (type(B) is np.ndarray and B.shape == (self.nx, 0) and B.dtype == np.float64
+                    and B.flags.c_contiguous and B.flags.writeable):
+                return None
+            return None if door.call(x, u, out[:2]) is None else out
+        except (TypeError, ValueError, OverflowError, RuntimeError):
+            return None
+
+    def __call__(self, x, u=None, p=None, t=None, *, out=None) -> np.ndarray:
+        """The state after one step (``out``: an array of ``nx`` values written and returned)."""
+        if self._doors is not None and p is None:
+            x1 = self._door(False, x, u, t, out)
+            if x1 is not None:
+                return x1
         args = self._args(x, u, p, t)
         if self._table is not None:
-            return self._table_solve(args[0], args[1], args[3], False)[0]
-        return self._solve(*args)[0]
+            x1 = self._table_solve(args[0], args[1], args[3], False)[0]
+        else:
+            x1 = self._solve(*args)[0]
+        return x1 if out is None else write_out(out, x1, "StepFunction")
 
-    def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
+    def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False, out=None):
         """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True`` (the implicit function
         theorem at the converged step: :mod:`ncgen.control.discrete`, or with the tables
-        :mod:`ncgen.runtime.table_step`)."""
+        :mod:`ncgen.runtime.table_step`).  ``out``: a tuple of writable C-contiguous float64
+        arrays of those shapes, written and returned."""
+        if self._doors is not None and p is None and not parameters:
+            result = self._door(True, x, u, t, out)
+            if result is not None:
+                return result
+        result = self._jacobians(x, u, p, t, parameters)
+        return result if out is None else write_out(out, result, "StepFunction.jacobians")
+
+    def _jacobians(self, x, u, p, t, parameters: bool):
+        """:meth:`jacobians` on the checked path (fresh arrays)."""
         args = self._args(x, u, p, t)
         if self._table is not None:            # a covered model has no parameters: C is empty
             out = self._table_solve(args[0], args[1], args[3], True)

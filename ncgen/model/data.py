@@ -50,6 +50,9 @@ class ModelData:
     #: ``{joint_space: DirectFunction}``: the compiled forward dynamics
     #: (:func:`ncgen.runtime.dynamics_at_state.forward_dynamics_kernel`).
     forward_dynamics_kernels: dict = field(default_factory=dict)
+    #: ``nc.forward_dynamics(..., backend="compiled")``'s door (False: none)
+    #: (:func:`ncgen.runtime.dynamics_at_state.forward_dynamics_door`).
+    forward_dynamics_door: object = None
     #: ``{(method, cflags): JointDynamicsKernel or the ModelError of a non-tree}``
     #: (:func:`ncgen.runtime.tree_kernel.joint_forward_dynamics_kernel`).
     tree_kernels: dict = field(default_factory=dict)

@@ -4,9 +4,10 @@
   ``A q̈ = γ`` (the KKT system, no stabilisation terms: on the constraint manifold the
   result is exact).  Joint accelerations: ``model.to_joint_space(q, v, a)``.
 * :func:`forward_dynamics_kernel` — the same solve (:func:`ncgen.assembly.derived.kkt_function`) as one
-  compiled C function called through ctypes (:class:`~ncgen.codegen.direct.DirectFunction`,
-  ~1–2 µs overhead); ``forward_dynamics(..., backend="compiled")`` uses it (compiled once
-  per model, cached on disk by content).
+  compiled C function (compiled once per model, cached on disk by content);
+  ``forward_dynamics(..., backend="compiled")`` calls it through its door
+  (:func:`forward_dynamics_door`: checks, kernel, finiteness of the result and fresh outputs or
+  ``out=`` in one C call, about 1 µs beside the kernel: benchmarks/door_overhead.py).
 * Joint space in and out for trees, faster: :func:`ncgen.runtime.tree_kernel.joint_forward_dynamics`
   (``nc.joint_forward_dynamics``; no multipliers, no KKT system).
 * :func:`multipliers_at_samples` — ``λ`` of the KKT system at many states (a stepper run's
@@ -28,7 +29,7 @@ from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.model.rolling import refuse_rolling
 from ncgen.runtime.tree_algorithm_kernels import rnea_applies, through
-from ncgen.validation import as_vector, write_out
+from ncgen.validation import MAX_MAGNITUDE, as_scalar, as_vector, write_out
 
 
 def _kkt(model, q, v, t, u, p):
@@ -58,6 +59,44 @@ def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
     return cached(model_data(model).forward_dynamics_kernels, joint_space, build)
 
 
+class ForwardDynamicsDoor:
+    """``door(q, v, u, out)``: ``(a, lam)`` of :func:`forward_dynamics_kernel` at time
+    :attr:`t` and the model's parameters in one C call (:func:`~ncgen.codegen.fast_call.fast_caller`:
+    lengths, kinds and magnitudes of ``q``, ``v``, ``u`` checked while copying, the kernel, its
+    outputs checked finite, fresh outputs or ``out`` written); None when the result is not
+    finite, a TypeError or ValueError for what it refuses (the caller's checked path names it).
+    A kernel of its own (:meth:`~ncgen.codegen.direct.DirectFunction.copy`): its time and
+    parameter buffers are the door's."""
+
+    __slots__ = ("call", "kernel", "t", "zero_u")
+
+    def __init__(self, model, call, kernel):
+        self.call, self.kernel, self.t, self.zero_u = call, kernel, 0.0, np.zeros(model.nu)
+        kernel.inputs[0][0] = 0.0
+        kernel.inputs[-1][...] = model.p0
+
+    def at(self, t) -> None:
+        """Time ``t`` (s) of the next calls (a finite number, else the error naming ``t``)."""
+        self.kernel.inputs[0][0] = self.t = as_scalar(t, "t")
+
+
+def forward_dynamics_door(model):
+    """The :class:`ForwardDynamicsDoor` of ``model``, made once per model (the model's
+    ``data.forward_dynamics_door``), or False without the fast-call extension or when an output
+    of the kernel is not dense."""
+    from ncgen.codegen.fast_call import fast_caller
+
+    data = model_data(model)
+    if data.forward_dynamics_door is None:
+        k = forward_dynamics_kernel(model).copy()
+        f = k.function
+        dense = all(f.sparsity_out(i).is_dense() and f.size2_out(i) == 1 for i in range(2))
+        call = dense and fast_caller(k, 3, first=1, bound=MAX_MAGNITUDE, check="finite",
+                                     outputs=[(k.outputs[0], f.size1_out(0), 0), (k.outputs[1], f.size1_out(1), 0)])
+        data.forward_dynamics_door = ForwardDynamicsDoor(model, call, k) if call else False
+    return data.forward_dynamics_door
+
+
 def multipliers_at_samples(model, t, q, v, u, p, accel=None) -> np.ndarray:
     """``λ`` at each sample ``(t_k, q_k, v_k, u_k)`` (rows) from the KKT system (the model's
     ``accel``, as the initial multipliers of a run; ``accel``: another evaluation of it, e.g.
@@ -71,13 +110,31 @@ def multipliers_at_samples(model, t, q, v, u, p, accel=None) -> np.ndarray:
     return np.array(lam).reshape(model.nc, n).T
 
 
-def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: str = "numpy"):
+def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: str = "numpy", out=None):
     """``(a, lam)``: accelerations q̈ (natural coordinates) and multipliers at ``(t, q, v)``
     with inputs ``u`` (default zero) and parameters ``p`` (default ``model.p0``).
     ``backend``: ``"numpy"`` (the KKT matrix assembled and solved here) or ``"compiled"``
-    (:func:`forward_dynamics_kernel`, the fast path for repeated calls)."""
+    (:func:`forward_dynamics_kernel` through :func:`forward_dynamics_door`, the fast path for
+    repeated calls).  ``out``: a tuple of two writable C-contiguous float64 arrays of ``nq``
+    and ``nc`` values, written and returned."""
     refuse_rolling(model, "forward_dynamics", "the accelerations with the rolling rows are rolling_system(model).accel(q, v, f) "
                    "(ncgen.assembly.nonholonomic)")
+    if backend == "compiled" and p is None:
+        try:
+            door = model._data.forward_dynamics_door
+        except AttributeError:              # not a model: model_data names what it is
+            door = None
+        if door is None:
+            door = forward_dynamics_door(model)
+        if door:
+            if type(t) is not float or t != door.t:
+                door.at(t)
+            try:
+                result = door.call(q, v, door.zero_u if u is None else u, out)
+            except (TypeError, ValueError, OverflowError, RuntimeError):
+                result = None               # the checked path below names what is wrong
+            if result is not None:
+                return result
     q = as_vector(q, model.nq, "q")
     v = as_vector(v, model.nq, "v")
     u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u (model.input_names order)")
@@ -86,7 +143,8 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
         a, lam = forward_dynamics_kernel(model)(t, q, v, u, p)
         if not (np.all(np.isfinite(a)) and np.all(np.isfinite(lam))):
             raise ModelError("forward_dynamics: the KKT matrix [[M, Aᵀ], [A, 0]] is singular at this state")
-        return a.copy(), lam.copy()
+        result = a.copy(), lam.copy()
+        return result if out is None else write_out(out, result, "forward_dynamics")
     if backend != "numpy":
         raise ModelError(f"forward_dynamics: backend: expected 'numpy' or 'compiled', got {backend!r}")
     A, F, gamma = _kkt(model, q, v, float(t), u, p)
@@ -96,7 +154,7 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
     if x is None:
         raise ModelError("forward_dynamics: the KKT matrix [[M, Aᵀ], [A, 0]] is singular at this state "
                          "(redundant constraints or a singular configuration; see nc.dof_report)")
-    return x[:nq], x[nq:]
+    return (x[:nq], x[nq:]) if out is None else write_out(out, (x[:nq], x[nq:]), "forward_dynamics")
 
 
 def _rnea_gives(model, joints: str) -> bool:

@@ -6,7 +6,9 @@ The step is RATTLE from ``x = [q; v]`` with inputs ``u`` held over it (no splitt
 Jacobians ``∂x⁺/∂x`` (2nq × 2nq) and ``∂x⁺/∂u`` (2nq × nu) come from the implicit function
 theorem on the stepper's own two Newton systems, each factored once (the C file's header
 comment gives the equations).  :class:`TableStep` is what
-:class:`ncgen.control.step.StepFunction` calls with ``kernels="tables"``.
+:class:`ncgen.control.step.StepFunction` calls with ``kernels="tables"``, through
+:meth:`TableStep.door` (the library's ``ncgen_elements_step_one``: one C call from Python,
+checks and fresh outputs or ``out=`` included).
 """
 from __future__ import annotations
 
@@ -59,6 +61,36 @@ def constraint_hessians(stepper: TableStepper) -> tuple[np.ndarray, np.ndarray, 
     return colind, np.ascontiguousarray(row), np.ascontiguousarray(val, dtype=float)
 
 
+class StepDoorArguments(ctypes.Structure):
+    """``ncgen_elements_step_door`` (templates/c/element_tables.c.j2): the fixed arguments of ``_step_one``."""
+
+    _fields_ = [("S", ctypes.c_void_p), ("options", ctypes.c_void_p), ("d_colind", ctypes.c_void_p),
+                ("d_row", ctypes.c_void_p), ("d_val", ctypes.c_void_p), ("p", ctypes.c_void_p),
+                ("h", ctypes.c_double), ("res_tol", ctypes.c_double), ("nq", ctypes.c_long), ("nu", ctypes.c_long)]
+
+
+class StepDoor:
+    """``door(x, u)`` or ``door(x, u, out)``: one step (and its Jacobians when made with
+    ``jacobians``) of a :class:`TableStep` in one C call through
+    :func:`~ncgen.codegen.fast_call.fast_caller`: ``x`` (2nq) and ``u`` (nu) checked finite and of
+    magnitude at most :data:`~ncgen.validation.MAX_MAGNITUDE` while copied, the step, its
+    convergence (the stepper's status and the residual at most ``res_tol``) and finite results
+    checked in C, fresh ``x⁺`` (and ``A``, ``B``; without inputs ``x⁺`` and ``A`` only) returned
+    or written into ``out``.  None when the step did not converge, a TypeError or ValueError
+    for what it refuses: the caller's checked path names the reason.  ``t``: the time input
+    (s), :meth:`at` sets it."""
+
+    __slots__ = ("call", "t", "_t", "_keep")
+
+    def __init__(self, call, t_buffer: np.ndarray, keep):
+        self.call, self._t, self._keep = call, t_buffer, keep
+        self.t = float(t_buffer[0])
+
+    def at(self, t: float) -> None:
+        """The time (s) of the next steps."""
+        self._t[0] = self.t = t
+
+
 class TableStep:
     """``step(x, u, t, jacobians)`` of one model through its table stepper: RATTLE with step
     ``h`` (s), Newton tolerance ``tol`` (the stepper's test: ``‖Φ(q⁺)‖∞ ≤ tol`` and the
@@ -85,6 +117,33 @@ class TableStep:
         self._jac = (self._Jx.ctypes.data, self._Ju.ctypes.data if self.nu else None)
         self._out = (self._res.ctypes.data, self._it.ctypes.data)
         self._p_at = self._p.ctypes.data
+
+    def door(self, jacobians: bool, res_tol: float):
+        """The :class:`StepDoor` of this step (with its Jacobians when ``jacobians``; a step
+        whose residual exceeds ``res_tol`` is refused), or None without the fast-call extension
+        or the library's ``_step_one``."""
+        from ncgen.codegen.fast_call import fast_caller
+        from ncgen.runtime.tree_library import _Direct
+        from ncgen.validation import MAX_MAGNITUDE
+
+        one = getattr(self.stepper._lib, f"{PACKAGE}_step_one", None)
+        if one is None:
+            return None
+        nq, nu = self.nq, self.nu
+        nx = 2 * nq
+        fixed = StepDoorArguments(self._S, self._opt, *self._fixed[:3], self._p_at, self.h, float(res_tol), nq, nu)
+        x, u, t = np.zeros(nx), np.zeros(nu), np.zeros(1)
+        x1, check, info = np.zeros(nx), np.zeros(2), np.zeros(3)
+        Jx, Ju = (np.zeros(nx * nx), np.zeros(nx * nu)) if jacobians else (None, None)
+        arg = (ctypes.c_void_p * 4)(ctypes.addressof(fixed), x.ctypes.data, u.ctypes.data if nu else None,
+                                    t.ctypes.data)
+        res = (ctypes.c_void_p * 5)(x1.ctypes.data, None if Jx is None else Jx.ctypes.data,
+                                    Ju.ctypes.data if jacobians and nu else None, check.ctypes.data, info.ctypes.data)
+        keep = (fixed, arg, res, x, u, t, x1, Jx, Ju, check, info, self)
+        shim = _Direct([None, x, u], one, (ctypes.addressof(arg), ctypes.addressof(res), 0, 0, 0), keep)
+        outputs = [(x1, nx, 0)] + ([(Jx, nx, nx)] + ([(Ju, nx, nu)] if nu else []) if jacobians else [])
+        call = fast_caller(shim, 2, first=1, check=check, tol=0.5, bound=MAX_MAGNITUDE, outputs=outputs)
+        return None if call is None else StepDoor(call, t, keep)
 
     def __call__(self, x: np.ndarray, u: np.ndarray, t: float, jacobians: bool):
         """``(status, x1, res, iterations, A, B)`` (``A``, ``B`` None unless ``jacobians``;

@@ -1,4 +1,4 @@
-"""Compiled rigid-body algorithms of trees, called from Python with 1–3 µs overhead: RNEA,
+"""Compiled rigid-body algorithms of trees, called from Python with about 1 µs overhead: RNEA,
 CRBA, ABA and the derivatives of RNEA and ABA (SX functions of
 :mod:`ncgen.assembly.tree_algorithms`, one small C library each, compiled on first use and
 cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFunction`).
@@ -8,8 +8,8 @@ cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFu
 * :func:`aba_derivatives` — ``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)``;
 * every one takes ``out=``: an array (a tuple of arrays for the derivatives) of the outputs'
   shapes, float64 and C-contiguous, written in place and returned (no allocation); a call with
-  the last call's time and parameters is one C call (:class:`Door`: 1–3 µs beside the kernel
-  alone on a loaded 2-core machine, benchmarks/call_overhead.py ``--alone``);
+  the last call's time and parameters is one C call (:class:`Door`: 0.5–1.5 µs beside the
+  kernel alone on a loaded 2-core machine, benchmarks/door_overhead.py);
 * :func:`algorithm_kernel` — the compiled kernel itself (:class:`AlgorithmKernel`), for loops
   (``nc.linearize(model, qj, vj, u, space="joint")`` uses the ABA derivatives:
   :mod:`ncgen.analysis.joint_linearization`).
@@ -541,7 +541,16 @@ def through(model, name: str, kernels: str, x, y, z, p, t: float, out):
 
 def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``M``: the joint-space mass matrix of the independent rates (Pinocchio's ``crba``, both triangles)."""
-    return door(model, "crba", kernels)((qj,), p, t, out)
+    d = door(model, "crba", kernels)
+    free = d.free
+    if free is not None and p is None:      # as through does (one argument)
+        try:
+            result = free(qj, out)
+            if result is not None:
+                return result
+        except (TypeError, ValueError, OverflowError, RuntimeError):
+            pass
+    return d((qj,), p, t, out)
 
 
 def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
@@ -552,11 +561,11 @@ def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto", ou
 def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto",
                      out=None) -> tuple[np.ndarray, ...]:
     """``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)`` (Pinocchio's ``computeRNEADerivatives``; ∂τ/∂a = M)."""
-    return door(model, "rnea_derivatives", kernels)((qj, vj, aj,), p, t, out)
+    return through(model, "rnea_derivatives", kernels, qj, vj, aj, p, t, out)
 
 
 def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto",
                     out=None) -> tuple[np.ndarray, ...]:
     """``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)`` (Pinocchio's ``computeABADerivatives``; ∂a/∂τ = M⁻¹;
     rows per independent rate)."""
-    return door(model, "aba_derivatives", kernels)((qj, vj, tau,), p, t, out)
+    return through(model, "aba_derivatives", kernels, qj, vj, tau, p, t, out)
