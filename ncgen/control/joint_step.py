@@ -93,20 +93,29 @@ def compiled_step(n: int, h: float):
     """``step(a, x)`` or ``step(a, x, out)``: ``x⁺`` from ABA's accelerations ``a`` at ``x`` in
     one C call, a fresh array or written into ``out`` (a ValueError for a bad ``out``); None
     without a C compiler or the extension."""
-    from ncgen.codegen.direct import compile_direct
     from ncgen.codegen.fast_call import fast_caller
 
+    direct = _compiled_copy(_COMPILED_STEP, "joint_step", step_function_of_n, n, h)
+    return None if direct is None else fast_caller(direct, 2, first=1, outputs=[(direct.outputs[0], 2 * n, 0)])
+
+
+def _compiled_copy(compiled: dict, name: str, make, n: int, h: float):
+    """``make(n)`` (a function of ``(h, ...)``) compiled once per ``n`` and ``$NCGEN_CFLAGS``
+    (kept in ``compiled``), as a copy with buffers of its own and its ``h`` set; None without a
+    C compiler."""
+    from ncgen.codegen.direct import compile_direct
+
     key = n, os.environ.get("NCGEN_CFLAGS")
-    if key not in _COMPILED_STEP:
+    if key not in compiled:
         try:
-            _COMPILED_STEP[key] = compile_direct(f"joint_step_{n}", step_function_of_n(n))
+            compiled[key] = compile_direct(f"{name}_{n}", make(n))
         except CompilerNotFound:
-            _COMPILED_STEP[key] = None
-    if _COMPILED_STEP[key] is None:
+            compiled[key] = None
+    if compiled[key] is None:
         return None
-    direct = _COMPILED_STEP[key].copy()                     # buffers of its own: h is this step's
+    direct = compiled[key].copy()
     direct.inputs[0][0] = h
-    return fast_caller(direct, 2, first=1, outputs=[(direct.outputs[0], 2 * n, 0)])
+    return direct
 
 
 def joined_caller(model, k, p):
@@ -143,21 +152,13 @@ def compiled_assembly(kernel, n: int, h: float, buffers=None):
     four outputs, those of a :func:`joined_caller`) in one C call, fresh arrays or
     written into ``out`` (a ValueError for a bad ``out``); None for a kernel on the tree tables,
     without a C compiler or without the extension."""
-    from ncgen.codegen.direct import compile_direct
     from ncgen.codegen.fast_call import fast_caller
 
     if not isinstance(kernel, AlgorithmKernel):
         return None
-    key = n, os.environ.get("NCGEN_CFLAGS")
-    if key not in _COMPILED:
-        try:
-            _COMPILED[key] = compile_direct(f"joint_step_jacobians_{n}", step_jacobians_function(n))
-        except CompilerNotFound:
-            _COMPILED[key] = None
-    if _COMPILED[key] is None:
+    direct = _compiled_copy(_COMPILED, "joint_step_jacobians", step_jacobians_function, n, h)
+    if direct is None:
         return None
-    direct = _COMPILED[key].copy()                          # buffers of its own: h is this step's
-    direct.inputs[0][0] = h
     x1, A, B = direct.outputs
     fast = fast_caller(direct, 5, first=1, outputs=[(x1, 2 * n, 0), (A, 2 * n, 2 * n), (B, 2 * n, n)])
     return None if fast is None else functools.partial(fast, *(kernel.direct.outputs[:4] if buffers is None
