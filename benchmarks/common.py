@@ -103,6 +103,15 @@ def start_model(which: str = "fall"):
 
 
 # ---------------------------------------------------------------- machine
+def callgrind_trees(root: Path, before: Path | None, calls: int, smoke: bool):
+    """``(calls, {"this tree": root[, "before": before]})`` of a callgrind comparison (2 calls for
+    ``--smoke``), or None, said on stdout, when valgrind's callgrind is not installed."""
+    if shutil.which("valgrind") is None or shutil.which("callgrind_control") is None:
+        print("valgrind's callgrind is not installed: nothing counted")
+        return None
+    return (2 if smoke else calls), {"this tree": root} | ({"before": before.resolve()} if before else {})
+
+
 def callgrind_rows(code: str, args: list[str], tree) -> list[tuple[int, str]]:
     """``(inclusive instructions, function)`` rows of ``callgrind_annotate`` for ``python -c code
     *args`` run under valgrind's callgrind on the ncgen ``tree`` (``PYTHONPATH``), counting only

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -24,7 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import callgrind_rows, machine  # noqa: E402
+from common import callgrind_rows, callgrind_trees, machine  # noqa: E402
 
 CHILD = r"""
 import os, subprocess, sys, importlib.metadata as md
@@ -81,11 +80,10 @@ def main(argv=None) -> None:
     ap.add_argument("--smoke", action="store_true", help="2 calls (CI)")
     a = ap.parse_args(argv)
     print(machine())
-    if shutil.which("valgrind") is None or shutil.which("callgrind_control") is None:
-        print("valgrind's callgrind is not installed: nothing counted")
+    counting = callgrind_trees(ROOT, a.before, a.calls, a.smoke)
+    if counting is None:
         return
-    calls = 2 if a.smoke else a.calls
-    trees = {"this tree": ROOT} | ({"before": a.before.resolve()} if a.before else {})
+    calls, trees = counting
     print(f"\n=== ur10: one call of each door at one state, {calls} calls counted"
           + (" (forward_dynamics and StepFunction: examples/chain.toml)" if a.all else ""))
     for door in DOORS + (MORE if a.all else ()):

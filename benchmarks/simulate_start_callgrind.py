@@ -14,14 +14,13 @@ from __future__ import annotations
 
 import argparse
 import re
-import shutil
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import MODEL_IMPORT, callgrind_rows, machine  # noqa: E402
+from common import MODEL_IMPORT, callgrind_rows, callgrind_trees, machine  # noqa: E402
 
 CHILD = MODEL_IMPORT + r"""
 import os, subprocess
@@ -65,11 +64,10 @@ def main(argv=None) -> None:
     ap.add_argument("--smoke", action="store_true", help="2 calls (CI)")
     a = ap.parse_args(argv)
     print(machine())
-    if shutil.which("valgrind") is None or shutil.which("callgrind_control") is None:
-        print("valgrind's callgrind is not installed: nothing counted")
+    counting = callgrind_trees(ROOT, a.before, a.calls, a.smoke)
+    if counting is None:
         return
-    calls = 2 if a.smoke else a.calls
-    trees = {"this tree": ROOT} | ({"before": a.before.resolve()} if a.before else {})
+    calls, trees = counting
     print(f"\n=== panda: nc.simulate of one 1 ms output step from a new start, {calls} calls counted, "
           f"kernels {a.kernels}")
     got = {}
